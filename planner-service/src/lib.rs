@@ -1,0 +1,1 @@
+//! Planner service: hybrid A* replanning, intentions (DLM, LPE), and the fleet HTTP API.

@@ -1,0 +1,842 @@
+//! The messages that travel between fleet processes, as plain serde data.
+//!
+//! Field names carry their units (`_m`, `_mps`, `_radps`, `_rad`, `_ns`, `_ms`, `_px`) because the
+//! JSON form is read by other languages and by humans. Angles are radians; poses follow REP-103
+//! (x forward, y left, yaw counter-clockwise). Byte blobs (camera images, LPE images, map cells)
+//! are `#[serde(skip)]`: the codec carries them as raw bytes after the JSON header, never inside
+//! JSON.
+//!
+//! Each message also has a `validate` method that the codec calls on both encode and decode, so an
+//! inconsistent message (an RGB buffer of the wrong size, a NaN that JSON would turn into `null`)
+//! is refused at the sender and never accepted at a receiver.
+
+use std::f64::consts::{PI, TAU};
+use std::fmt;
+
+use serde::{Deserialize, Serialize};
+
+use crate::ids::{MapId, MapName, RobotId, TaskId};
+
+/// A message field that breaks an invariant, found by a `validate` method.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("invalid {field}: {reason}")]
+pub struct ValidationError {
+    /// Dotted path of the field, e.g. `"image.data"`.
+    pub field: &'static str,
+    pub reason: String,
+}
+
+impl ValidationError {
+    pub fn new(field: &'static str, reason: impl Into<String>) -> Self {
+        Self {
+            field,
+            reason: reason.into(),
+        }
+    }
+}
+
+/// JSON has no NaN or infinity (serde_json writes `null`), so such values must never be encoded.
+fn check_finite(field: &'static str, value: f64) -> Result<(), ValidationError> {
+    if value.is_finite() {
+        Ok(())
+    } else {
+        Err(ValidationError::new(
+            field,
+            format!("{value} is not a finite number"),
+        ))
+    }
+}
+
+/// Sequence number and time stamp carried by every streamed message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Header {
+    /// Per-publisher counter, increasing by one per message; gaps mean loss.
+    pub seq: u64,
+    /// Monotonic time in ns (the sim clock in lock-step mode).
+    pub stamp_ns: u64,
+}
+
+impl Header {
+    pub fn new(seq: u64, stamp_ns: u64) -> Self {
+        Self { seq, stamp_ns }
+    }
+}
+
+/// Wraps an angle into (-pi, pi].
+pub fn normalize_angle(rad: f64) -> f64 {
+    // `%` keeps the sign of the dividend, so one correction step lands in (-pi, pi].
+    let a = rad % TAU;
+    if a <= -PI {
+        a + TAU
+    } else if a > PI {
+        a - TAU
+    } else {
+        a
+    }
+}
+
+/// A planar pose; which frame it is in is said by the field holding it.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Pose2D {
+    pub x_m: f64,
+    pub y_m: f64,
+    /// Counter-clockwise from the frame's x axis.
+    pub yaw_rad: f64,
+}
+
+impl Pose2D {
+    pub fn new(x_m: f64, y_m: f64, yaw_rad: f64) -> Self {
+        Self { x_m, y_m, yaw_rad }
+    }
+
+    /// Euclidean distance between the positions, ignoring yaw.
+    pub fn distance_m(&self, other: &Pose2D) -> f64 {
+        (self.x_m - other.x_m).hypot(self.y_m - other.y_m)
+    }
+
+    pub fn validate(&self, field: &'static str) -> Result<(), ValidationError> {
+        for v in [self.x_m, self.y_m, self.yaw_rad] {
+            check_finite(field, v)?;
+        }
+        Ok(())
+    }
+}
+
+/// One sweep of a planar LIDAR, in the robot frame.
+///
+/// Beam `i` points at `angle_min_rad + i * angle_increment_rad`. A range `>= range_max_m` means
+/// "no return" (senders write exactly `range_max_m`; JSON cannot carry infinity). Ranges below
+/// `range_min_m` are too close to measure and should be treated as unreliable.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LaserScan {
+    pub header: Header,
+    pub angle_min_rad: f32,
+    pub angle_increment_rad: f32,
+    pub range_min_m: f32,
+    pub range_max_m: f32,
+    pub ranges_m: Vec<f32>,
+}
+
+impl LaserScan {
+    /// Angle of beam `i` in the robot frame.
+    pub fn beam_angle_rad(&self, i: usize) -> f32 {
+        self.angle_min_rad + i as f32 * self.angle_increment_rad
+    }
+
+    /// Whether beam `i` hit something within the sensor's range (false for out-of-bounds `i`).
+    pub fn is_return(&self, i: usize) -> bool {
+        self.ranges_m
+            .get(i)
+            .is_some_and(|&r| r >= self.range_min_m && r < self.range_max_m)
+    }
+
+    pub fn validate(&self) -> Result<(), ValidationError> {
+        for (field, v) in [
+            ("angle_min_rad", self.angle_min_rad),
+            ("angle_increment_rad", self.angle_increment_rad),
+            ("range_min_m", self.range_min_m),
+            ("range_max_m", self.range_max_m),
+        ] {
+            check_finite(field, f64::from(v))?;
+        }
+        if !(self.range_min_m >= 0.0 && self.range_min_m < self.range_max_m) {
+            return Err(ValidationError::new(
+                "range_max_m",
+                format!(
+                    "need 0 <= range_min_m < range_max_m, got {} and {}",
+                    self.range_min_m, self.range_max_m
+                ),
+            ));
+        }
+        if let Some((i, r)) = self
+            .ranges_m
+            .iter()
+            .enumerate()
+            .find(|(_, r)| !r.is_finite() || **r < 0.0)
+        {
+            return Err(ValidationError::new(
+                "ranges_m",
+                format!("beam {i} has range {r}; write range_max_m for no return"),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Wheel odometry: pose in the `odom` frame (drifts) and the measured body velocity.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Odometry {
+    pub header: Header,
+    /// In the odom frame, not the map frame.
+    pub pose: Pose2D,
+    pub v_mps: f64,
+    pub omega_radps: f64,
+}
+
+impl Odometry {
+    pub fn validate(&self) -> Result<(), ValidationError> {
+        self.pose.validate("pose")?;
+        check_finite("v_mps", self.v_mps)?;
+        check_finite("omega_radps", self.omega_radps)
+    }
+}
+
+/// Velocity command for a differential-drive base (forward speed and CCW turn rate).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CmdVel {
+    pub header: Header,
+    pub v_mps: f64,
+    pub omega_radps: f64,
+}
+
+impl CmdVel {
+    pub fn validate(&self) -> Result<(), ValidationError> {
+        check_finite("v_mps", self.v_mps)?;
+        check_finite("omega_radps", self.omega_radps)
+    }
+}
+
+/// Which version of which floor plan a pose or intention refers to.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MapRef {
+    pub name: MapName,
+    pub version: u32,
+}
+
+/// The agent's localization result (AMCL) in the map frame.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoseEstimate {
+    pub header: Header,
+    /// In the map frame.
+    pub pose: Pose2D,
+    /// 3x3 row-major covariance over (x_m, y_m, yaw_rad).
+    pub covariance: [f64; 9],
+    /// Stamp of the scan/odometry the estimate was computed from (the planner measures latency
+    /// against it).
+    pub sensor_stamp_ns: u64,
+    pub map: MapRef,
+}
+
+impl PoseEstimate {
+    /// Position uncertainty: the square root of the largest eigenvalue of the xy covariance block,
+    /// i.e. the standard deviation along the worst direction (conservative for "am I lost?").
+    pub fn position_std_m(&self) -> f64 {
+        let c = &self.covariance;
+        let (a, d) = (c[0], c[4]);
+        // Symmetrize: a covariance should be symmetric, but do not trust rounding of the sender.
+        let b = 0.5 * (c[1] + c[3]);
+        let mean = 0.5 * (a + d);
+        let half_diff = 0.5 * (a - d);
+        let max_eig = mean + half_diff.hypot(b);
+        max_eig.max(0.0).sqrt()
+    }
+
+    /// Heading standard deviation: `sqrt(cov[yaw, yaw])`.
+    pub fn yaw_std_rad(&self) -> f64 {
+        self.covariance[8].max(0.0).sqrt()
+    }
+
+    pub fn validate(&self) -> Result<(), ValidationError> {
+        self.pose.validate("pose")?;
+        for v in self.covariance {
+            check_finite("covariance", v)?;
+        }
+        Ok(())
+    }
+}
+
+/// Discretized local move (paper §3.1): the DLM intention.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Dlm {
+    TurnLeft,
+    TurnRight,
+    GoForward,
+    Stop,
+}
+
+impl Dlm {
+    /// All values in one-hot index order.
+    pub const ALL: [Dlm; 4] = [Dlm::TurnLeft, Dlm::TurnRight, Dlm::GoForward, Dlm::Stop];
+
+    /// Position in the network's one-hot input; fixed by the ONNX contract.
+    pub fn index(self) -> usize {
+        match self {
+            Dlm::TurnLeft => 0,
+            Dlm::TurnRight => 1,
+            Dlm::GoForward => 2,
+            Dlm::Stop => 3,
+        }
+    }
+
+    pub fn from_index(index: usize) -> Option<Dlm> {
+        Self::ALL.get(index).copied()
+    }
+
+    pub fn one_hot(self) -> [f32; 4] {
+        let mut v = [0.0; 4];
+        v[self.index()] = 1.0;
+        v
+    }
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Dlm::TurnLeft => "turn_left",
+            Dlm::TurnRight => "turn_right",
+            Dlm::GoForward => "go_forward",
+            Dlm::Stop => "stop",
+        }
+    }
+}
+
+impl fmt::Display for Dlm {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// How an [`Image`]'s bytes are to be read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ImageEncoding {
+    /// Uncompressed, row-major from the top-left, 3 bytes (R, G, B) per pixel, no padding.
+    Rgb8,
+    Png,
+    Jpeg,
+}
+
+impl ImageEncoding {
+    /// MIME type; raw RGB8 has no registered one, so a vendor-style `image/x-rgb8` is used.
+    pub fn mime(self) -> &'static str {
+        match self {
+            ImageEncoding::Rgb8 => "image/x-rgb8",
+            ImageEncoding::Png => "image/png",
+            ImageEncoding::Jpeg => "image/jpeg",
+        }
+    }
+}
+
+const PNG_SIGNATURE: [u8; 8] = [0x89, b'P', b'N', b'G', b'\r', b'\n', 0x1a, b'\n'];
+const JPEG_SOI: [u8; 3] = [0xff, 0xd8, 0xff];
+
+/// An image with its pixel size and encoding.
+///
+/// `data` is not part of the serde form: the codec sends it as a raw blob after the JSON header.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Image {
+    pub width_px: u32,
+    pub height_px: u32,
+    pub encoding: ImageEncoding,
+    #[serde(skip)]
+    pub data: Vec<u8>,
+}
+
+impl Image {
+    /// Builds and validates an image.
+    pub fn new(
+        width_px: u32,
+        height_px: u32,
+        encoding: ImageEncoding,
+        data: Vec<u8>,
+    ) -> Result<Self, ValidationError> {
+        let image = Self {
+            width_px,
+            height_px,
+            encoding,
+            data,
+        };
+        image.validate()?;
+        Ok(image)
+    }
+
+    /// Byte length of an RGB8 image of this size (None if it overflows usize).
+    pub fn rgb8_len(width_px: u32, height_px: u32) -> Option<usize> {
+        (width_px as usize)
+            .checked_mul(height_px as usize)?
+            .checked_mul(3)
+    }
+
+    /// Checks the size is non-zero and the bytes match the encoding (exact length for RGB8, the
+    /// format signature for PNG/JPEG; compressed content is not decoded here).
+    pub fn validate(&self) -> Result<(), ValidationError> {
+        if self.width_px == 0 || self.height_px == 0 {
+            return Err(ValidationError::new(
+                "image.size",
+                format!("{}x{} px has no pixels", self.width_px, self.height_px),
+            ));
+        }
+        match self.encoding {
+            ImageEncoding::Rgb8 => {
+                let expected = Self::rgb8_len(self.width_px, self.height_px);
+                if expected != Some(self.data.len()) {
+                    return Err(ValidationError::new(
+                        "image.data",
+                        format!(
+                            "rgb8 {}x{} px needs {} bytes, got {}",
+                            self.width_px,
+                            self.height_px,
+                            expected.map_or_else(|| "too many".to_string(), |n| n.to_string()),
+                            self.data.len()
+                        ),
+                    ));
+                }
+            }
+            ImageEncoding::Png if !self.data.starts_with(&PNG_SIGNATURE) => {
+                return Err(ValidationError::new(
+                    "image.data",
+                    format!("not PNG data ({} bytes, no PNG signature)", self.data.len()),
+                ));
+            }
+            ImageEncoding::Jpeg if !self.data.starts_with(&JPEG_SOI) => {
+                return Err(ValidationError::new(
+                    "image.data",
+                    format!(
+                        "not JPEG data ({} bytes, no JPEG SOI marker)",
+                        self.data.len()
+                    ),
+                ));
+            }
+            ImageEncoding::Png | ImageEncoding::Jpeg => {}
+        }
+        Ok(())
+    }
+}
+
+/// One frame of the robot's monocular camera.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraFrame {
+    pub header: Header,
+    pub image: Image,
+}
+
+/// What the planner tells a robot to do next (paper §3.1), answering one pose estimate.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Intention {
+    pub header: Header,
+    /// None while the robot has no task (the intention is then `Stop`).
+    pub task_id: Option<TaskId>,
+    /// Index of the goal in the task's goal sequence that this path leads to.
+    pub goal_index: u32,
+    /// `header.seq` of the [`PoseEstimate`] this intention was planned from.
+    pub answers_pose_seq: u64,
+    /// `header.stamp_ns` of that pose estimate.
+    pub answers_pose_stamp_ns: u64,
+    pub map: MapRef,
+    /// Planned path in the map frame, from the robot towards the goal.
+    pub path: Vec<Pose2D>,
+    pub dlm: Dlm,
+    /// Local path and environment image (224x224 RGB in DESIGN §4), when the planner renders one.
+    pub lpe: Option<Image>,
+}
+
+impl Intention {
+    pub fn validate(&self) -> Result<(), ValidationError> {
+        for pose in &self.path {
+            pose.validate("path")?;
+        }
+        match &self.lpe {
+            Some(image) => image.validate(),
+            None => Ok(()),
+        }
+    }
+}
+
+/// The agent's driving state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AgentState {
+    Starting,
+    Idle,
+    Driving,
+    /// Slowing down to a stop; `stop_reason` says why.
+    Stopping,
+    Stopped,
+}
+
+/// Why an agent is stopping or stopped.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum StopReason {
+    NoIntention,
+    StaleIntention { age_ms: u64 },
+    LocalizationLost { position_std_m: f64 },
+    ControllerError { message: String },
+    GoalReached,
+    Collision,
+    Commanded,
+}
+
+impl fmt::Display for StopReason {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            StopReason::NoIntention => f.write_str("no intention received from the planner"),
+            StopReason::StaleIntention { age_ms } => {
+                write!(f, "newest intention is stale ({age_ms} ms old)")
+            }
+            StopReason::LocalizationLost { position_std_m } => write!(
+                f,
+                "localization lost (position uncertainty {position_std_m:.2} m)"
+            ),
+            StopReason::ControllerError { message } => write!(f, "controller error: {message}"),
+            StopReason::GoalReached => f.write_str("goal reached"),
+            StopReason::Collision => f.write_str("collision"),
+            StopReason::Commanded => f.write_str("commanded to stop"),
+        }
+    }
+}
+
+/// Periodic status of a robot agent.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AgentStatus {
+    pub header: Header,
+    pub state: AgentState,
+    pub stop_reason: Option<StopReason>,
+    /// Name of the active controller, e.g. `"dlm_net"`, `"path_tracker"`.
+    pub controller: String,
+    /// The map the agent localizes on, once it has one.
+    pub map: Option<MapRef>,
+    pub localized: bool,
+}
+
+impl AgentStatus {
+    pub fn validate(&self) -> Result<(), ValidationError> {
+        if let Some(StopReason::LocalizationLost { position_std_m }) = &self.stop_reason {
+            check_finite("stop_reason.position_std_m", *position_std_m)?;
+        }
+        Ok(())
+    }
+}
+
+/// Lifecycle of a delivery task.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum TaskState {
+    Queued,
+    Assigned {
+        robot_id: RobotId,
+    },
+    /// Driving towards goal `goal_index` of the task.
+    Active {
+        robot_id: RobotId,
+        goal_index: u32,
+    },
+    Completed,
+    Failed {
+        reason: String,
+    },
+    Cancelled,
+}
+
+impl TaskState {
+    /// Whether the task can no longer change state.
+    pub fn is_terminal(&self) -> bool {
+        matches!(
+            self,
+            TaskState::Completed | TaskState::Failed { .. } | TaskState::Cancelled
+        )
+    }
+
+    /// The robot working on the task, if any.
+    pub fn robot_id(&self) -> Option<&RobotId> {
+        match self {
+            TaskState::Assigned { robot_id } | TaskState::Active { robot_id, .. } => Some(robot_id),
+            _ => None,
+        }
+    }
+}
+
+/// A task changed state; published by the planner service.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TaskEvent {
+    pub header: Header,
+    pub task_id: TaskId,
+    pub map: MapName,
+    pub state: TaskState,
+    pub goal_count: u32,
+}
+
+/// Cell value meaning "unknown" in a [`MapGrid`]; 0..=100 are occupancy percentages.
+pub const UNKNOWN_CELL: u8 = 255;
+
+/// Description of one stored map version.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MapMeta {
+    pub id: MapId,
+    pub name: MapName,
+    pub version: u32,
+    /// Hex sha256 of the map content.
+    pub content_hash: String,
+    pub width_cells: u32,
+    pub height_cells: u32,
+    /// Edge length of one square cell.
+    pub resolution_m: f64,
+    /// Map-frame pose of the bottom-left corner of cell (0, 0) (as ROS `map_server`).
+    pub origin: Pose2D,
+    pub free_cells: u64,
+    pub occupied_cells: u64,
+    pub unknown_cells: u64,
+    /// Wall-clock creation time, ns since the Unix epoch.
+    pub created_ns: u64,
+}
+
+impl MapMeta {
+    pub fn map_ref(&self) -> MapRef {
+        MapRef {
+            name: self.name.clone(),
+            version: self.version,
+        }
+    }
+
+    /// Number of cells (None if it overflows usize).
+    pub fn cell_count(&self) -> Option<usize> {
+        (self.width_cells as usize).checked_mul(self.height_cells as usize)
+    }
+
+    pub fn validate(&self) -> Result<(), ValidationError> {
+        if self.width_cells == 0 || self.height_cells == 0 {
+            return Err(ValidationError::new(
+                "meta.size",
+                format!("{}x{} cells is empty", self.width_cells, self.height_cells),
+            ));
+        }
+        if !(self.resolution_m.is_finite() && self.resolution_m > 0.0) {
+            return Err(ValidationError::new(
+                "meta.resolution_m",
+                format!("{} is not a positive finite number", self.resolution_m),
+            ));
+        }
+        self.origin.validate("meta.origin")
+    }
+}
+
+/// A whole occupancy grid.
+///
+/// `cells` is row-major, row 0 is the bottom row (lowest y, as a ROS OccupancyGrid); values
+/// 0..=100 are occupancy probability in percent and [`UNKNOWN_CELL`] (255) is unknown. `cells` is
+/// not part of the serde form: the codec sends it as a raw blob.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MapGrid {
+    pub meta: MapMeta,
+    #[serde(skip)]
+    pub cells: Vec<u8>,
+}
+
+impl MapGrid {
+    /// Index into `cells` of column `x`, row `y` (row 0 at the bottom).
+    pub fn index(&self, x: u32, y: u32) -> Option<usize> {
+        if x < self.meta.width_cells && y < self.meta.height_cells {
+            Some(y as usize * self.meta.width_cells as usize + x as usize)
+        } else {
+            None
+        }
+    }
+
+    pub fn cell(&self, x: u32, y: u32) -> Option<u8> {
+        self.index(x, y).and_then(|i| self.cells.get(i).copied())
+    }
+
+    pub fn validate(&self) -> Result<(), ValidationError> {
+        self.meta.validate()?;
+        let expected = self.meta.cell_count();
+        if expected != Some(self.cells.len()) {
+            return Err(ValidationError::new(
+                "cells",
+                format!(
+                    "{}x{} grid needs {} cells, got {}",
+                    self.meta.width_cells,
+                    self.meta.height_cells,
+                    expected.map_or_else(|| "too many".to_string(), |n| n.to_string()),
+                    self.cells.len()
+                ),
+            ));
+        }
+        if let Some((i, v)) = self
+            .cells
+            .iter()
+            .enumerate()
+            .find(|(_, &v)| v > 100 && v != UNKNOWN_CELL)
+        {
+            return Err(ValidationError::new(
+                "cells",
+                format!("cell {i} has value {v}; allowed are 0..=100 and 255 (unknown)"),
+            ));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn close(a: f64, b: f64) -> bool {
+        (a - b).abs() < 1e-12
+    }
+
+    #[test]
+    fn normalize_angle_range() {
+        assert!(close(normalize_angle(0.0), 0.0));
+        assert!(close(normalize_angle(PI), PI));
+        assert!(close(normalize_angle(-PI), PI));
+        assert!(close(normalize_angle(3.0 * PI), PI));
+        assert!(close(normalize_angle(-0.5 * PI), -0.5 * PI));
+        assert!(close(normalize_angle(TAU + 0.25), 0.25));
+        assert!(close(normalize_angle(-TAU - 0.25), -0.25));
+        for i in -1000..1000 {
+            let a = normalize_angle(f64::from(i) * 0.0137);
+            assert!(a > -PI && a <= PI, "{a}");
+        }
+    }
+
+    #[test]
+    fn dlm_indices() {
+        for (i, d) in Dlm::ALL.iter().enumerate() {
+            assert_eq!(d.index(), i);
+            assert_eq!(Dlm::from_index(i), Some(*d));
+            let oh = d.one_hot();
+            assert_eq!(oh.iter().sum::<f32>(), 1.0);
+            assert_eq!(oh[i], 1.0);
+        }
+        assert_eq!(Dlm::from_index(4), None);
+        assert_eq!(
+            serde_json::to_string(&Dlm::GoForward).unwrap(),
+            "\"go_forward\""
+        );
+        assert_eq!(Dlm::TurnLeft.to_string(), "turn_left");
+    }
+
+    #[test]
+    fn pose_std() {
+        let mut cov = [0.0; 9];
+        cov[0] = 0.04;
+        cov[4] = 0.01;
+        cov[8] = 0.09;
+        let p = PoseEstimate {
+            header: Header::new(1, 2),
+            pose: Pose2D::new(1.0, 2.0, 0.5),
+            covariance: cov,
+            sensor_stamp_ns: 1,
+            map: MapRef {
+                name: MapName::new("m").unwrap(),
+                version: 1,
+            },
+        };
+        assert!(close(p.position_std_m(), 0.2));
+        assert!(close(p.yaw_std_rad(), 0.3));
+        // Correlated xy: eigenvalues of [[1, 0.5], [0.5, 1]] are 1.5 and 0.5.
+        let mut q = p.clone();
+        q.covariance[0] = 1.0;
+        q.covariance[4] = 1.0;
+        q.covariance[1] = 0.5;
+        q.covariance[3] = 0.5;
+        assert!(close(q.position_std_m(), 1.5f64.sqrt()));
+    }
+
+    #[test]
+    fn scan_beams() {
+        let scan = LaserScan {
+            header: Header::default(),
+            angle_min_rad: -1.0,
+            angle_increment_rad: 0.5,
+            range_min_m: 0.1,
+            range_max_m: 10.0,
+            ranges_m: vec![1.0, 10.0, 0.05, 12.0],
+        };
+        assert_eq!(scan.beam_angle_rad(2), 0.0);
+        assert!(scan.is_return(0));
+        assert!(!scan.is_return(1));
+        assert!(!scan.is_return(2));
+        assert!(!scan.is_return(3));
+        assert!(!scan.is_return(4));
+        assert!(scan.validate().is_ok());
+        let mut bad = scan.clone();
+        bad.ranges_m[0] = f32::INFINITY;
+        assert_eq!(bad.validate().unwrap_err().field, "ranges_m");
+    }
+
+    #[test]
+    fn image_validation() {
+        assert!(Image::new(2, 2, ImageEncoding::Rgb8, vec![0; 12]).is_ok());
+        let e = Image::new(2, 2, ImageEncoding::Rgb8, vec![0; 11]).unwrap_err();
+        assert_eq!(e.field, "image.data");
+        assert!(e.reason.contains("12") && e.reason.contains("11"), "{e}");
+        assert!(Image::new(0, 2, ImageEncoding::Rgb8, vec![]).is_err());
+        assert!(Image::new(2, 2, ImageEncoding::Png, vec![1, 2, 3]).is_err());
+        assert!(Image::new(2, 2, ImageEncoding::Jpeg, vec![0xff, 0xd8, 0xff, 0xe0]).is_ok());
+        assert_eq!(ImageEncoding::Png.mime(), "image/png");
+    }
+
+    #[test]
+    fn stop_reason_words_and_tags() {
+        let r = StopReason::StaleIntention { age_ms: 600 };
+        assert_eq!(r.to_string(), "newest intention is stale (600 ms old)");
+        assert_eq!(
+            serde_json::to_string(&r).unwrap(),
+            r#"{"kind":"stale_intention","age_ms":600}"#
+        );
+        assert_eq!(
+            serde_json::to_string(&StopReason::GoalReached).unwrap(),
+            r#"{"kind":"goal_reached"}"#
+        );
+    }
+
+    #[test]
+    fn task_state_tags() {
+        let s = TaskState::Active {
+            robot_id: RobotId::new("r1").unwrap(),
+            goal_index: 2,
+        };
+        assert_eq!(
+            serde_json::to_string(&s).unwrap(),
+            r#"{"kind":"active","robot_id":"r1","goal_index":2}"#
+        );
+        assert!(!s.is_terminal());
+        assert_eq!(s.robot_id().map(RobotId::as_str), Some("r1"));
+        assert!(TaskState::Failed { reason: "x".into() }.is_terminal());
+    }
+
+    #[test]
+    fn grid_validation_and_indexing() {
+        let meta = MapMeta {
+            id: MapId::new("m-0123456789ab").unwrap(),
+            name: MapName::new("m").unwrap(),
+            version: 1,
+            content_hash: "0123456789ab".into(),
+            width_cells: 3,
+            height_cells: 2,
+            resolution_m: 0.05,
+            origin: Pose2D::default(),
+            free_cells: 6,
+            occupied_cells: 0,
+            unknown_cells: 0,
+            created_ns: 0,
+        };
+        let grid = MapGrid {
+            meta,
+            cells: vec![0, 1, 2, 3, 100, 255],
+        };
+        assert!(grid.validate().is_ok());
+        assert_eq!(grid.cell(1, 1), Some(100));
+        assert_eq!(grid.cell(3, 0), None);
+        let mut bad = grid.clone();
+        bad.cells.pop();
+        assert_eq!(bad.validate().unwrap_err().field, "cells");
+        let mut bad = grid.clone();
+        bad.cells[0] = 101;
+        assert!(bad.validate().unwrap_err().reason.contains("101"));
+    }
+}

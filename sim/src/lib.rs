@@ -1,0 +1,1 @@
+//! Simulator: the ground-truth world, a differential-drive base and its sensors.
