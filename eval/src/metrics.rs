@@ -16,15 +16,26 @@ pub struct TrajectorySample {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum MetricError {
     #[error("need at least {needed} samples for {metric}, got {got}")]
-    TooFewSamples { metric: &'static str, needed: usize, got: usize },
+    TooFewSamples {
+        metric: &'static str,
+        needed: usize,
+        got: usize,
+    },
     #[error("samples must be uniformly spaced in time: sample {index} has dt = {dt_s} s, expected {expected_s} s")]
-    NonUniform { index: usize, dt_s: f64, expected_s: f64 },
+    NonUniform {
+        index: usize,
+        dt_s: f64,
+        expected_s: f64,
+    },
 }
 
 /// Length of the driven path in metres.
 #[must_use]
 pub fn path_length_m(samples: &[TrajectorySample]) -> f64 {
-    samples.windows(2).map(|w| (w[1].x_m - w[0].x_m).hypot(w[1].y_m - w[0].y_m)).sum()
+    samples
+        .windows(2)
+        .map(|w| (w[1].x_m - w[0].x_m).hypot(w[1].y_m - w[0].y_m))
+        .sum()
 }
 
 /// Mean |jerk| in m/s³ over a uniformly sampled trajectory.
@@ -43,7 +54,11 @@ pub fn mean_abs_jerk_mps3(samples: &[TrajectorySample]) -> Result<f64, MetricErr
     for (i, w) in samples.windows(2).enumerate() {
         let d = w[1].t_s - w[0].t_s;
         if !(d > 0.0) || (d - dt).abs() > 0.01 * dt {
-            return Err(MetricError::NonUniform { index: i + 1, dt_s: d, expected_s: dt });
+            return Err(MetricError::NonUniform {
+                index: i + 1,
+                dt_s: d,
+                expected_s: dt,
+            });
         }
     }
     // Third difference over four consecutive samples: (p3 - 3 p2 + 3 p1 - p0) / dt³.
@@ -93,9 +108,15 @@ mod tests {
     #[test]
     fn rejects_short_or_irregular_trajectories() {
         let short = sampled(|t| (t, 0.0), 3, 0.1);
-        assert!(matches!(mean_abs_jerk_mps3(&short), Err(MetricError::TooFewSamples { .. })));
+        assert!(matches!(
+            mean_abs_jerk_mps3(&short),
+            Err(MetricError::TooFewSamples { .. })
+        ));
         let mut irregular = sampled(|t| (t, 0.0), 10, 0.1);
         irregular[5].t_s += 0.05;
-        assert!(matches!(mean_abs_jerk_mps3(&irregular), Err(MetricError::NonUniform { index: 5, .. })));
+        assert!(matches!(
+            mean_abs_jerk_mps3(&irregular),
+            Err(MetricError::NonUniform { index: 5, .. })
+        ));
     }
 }

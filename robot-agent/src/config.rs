@@ -65,7 +65,11 @@ pub struct Safety {
 
 impl Default for Safety {
     fn default() -> Self {
-        Self { intention_deadline_ms: 300, max_position_std_m: 0.5, stop_decel_mps2: 1.0 }
+        Self {
+            intention_deadline_ms: 300,
+            max_position_std_m: 0.5,
+            stop_decel_mps2: 1.0,
+        }
     }
 }
 
@@ -101,7 +105,11 @@ pub enum ConfigError {
     #[error("cannot parse agent config: {0}")]
     Parse(#[from] toml::de::Error),
     #[error("invalid {field} = {value}: {reason}")]
-    Invalid { field: &'static str, value: String, reason: &'static str },
+    Invalid {
+        field: &'static str,
+        value: String,
+        reason: &'static str,
+    },
 }
 
 impl AgentConfig {
@@ -125,7 +133,10 @@ impl AgentConfig {
             ("limits.max_speed_mps", self.limits.max_speed_mps),
             ("limits.max_turn_radps", self.limits.max_turn_radps),
             ("limits.max_accel_mps2", self.limits.max_accel_mps2),
-            ("limits.max_turn_accel_radps2", self.limits.max_turn_accel_radps2),
+            (
+                "limits.max_turn_accel_radps2",
+                self.limits.max_turn_accel_radps2,
+            ),
             ("safety.max_position_std_m", self.safety.max_position_std_m),
             ("safety.stop_decel_mps2", self.safety.stop_decel_mps2),
         ];
@@ -180,7 +191,10 @@ mod tests {
         let err = AgentConfig::from_toml("[safety]\nintention_deadline_msec = 3\n").unwrap_err();
         assert!(err.to_string().contains("intention_deadline_msec"), "{err}");
         let err = AgentConfig::from_toml("[limits]\nmax_speed_mps = -1.0\n").unwrap_err();
-        assert!(err.to_string().contains("limits.max_speed_mps = -1"), "{err}");
+        assert!(
+            err.to_string().contains("limits.max_speed_mps = -1"),
+            "{err}"
+        );
         let err = AgentConfig::from_toml("controller = \"dlm\"\n").unwrap_err();
         assert!(err.to_string().contains("model"), "{err}");
         let err = AgentConfig::from_toml("controller = \"teleport\"\n").unwrap_err();
