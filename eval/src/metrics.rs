@@ -53,7 +53,7 @@ pub fn mean_abs_jerk_mps3(samples: &[TrajectorySample]) -> Result<f64, MetricErr
     let dt = samples[1].t_s - samples[0].t_s;
     for (i, w) in samples.windows(2).enumerate() {
         let d = w[1].t_s - w[0].t_s;
-        if !(d > 0.0) || (d - dt).abs() > 0.01 * dt {
+        if d.is_nan() || d <= 0.0 || (d - dt).abs() > 0.01 * dt {
             return Err(MetricError::NonUniform {
                 index: i + 1,
                 dt_s: d,

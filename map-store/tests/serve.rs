@@ -13,25 +13,7 @@ use protocol::{keys, MapName, SiteId};
 const TIMEOUT: Duration = Duration::from_secs(5);
 
 async fn session_pair() -> (zenoh::Session, zenoh::Session) {
-    let mut c = zenoh::Config::default();
-    c.insert_json5("listen/endpoints", r#"["tcp/127.0.0.1:0"]"#)
-        .unwrap();
-    c.insert_json5("scouting/multicast/enabled", "false")
-        .unwrap();
-    let server = zenoh::open(c).await.unwrap();
-    let locators = server.info().locators().await;
-    let endpoints: Vec<String> = locators.iter().map(ToString::to_string).collect();
-    assert!(!endpoints.is_empty());
-    let mut c = zenoh::Config::default();
-    c.insert_json5(
-        "connect/endpoints",
-        &serde_json::to_string(&endpoints).unwrap(),
-    )
-    .unwrap();
-    c.insert_json5("scouting/multicast/enabled", "false")
-        .unwrap();
-    let client = zenoh::open(c).await.unwrap();
-    (server, client)
+    protocol::loopback_pair().await.unwrap()
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -76,4 +76,6 @@ pub use messages::{
     ImageEncoding, Intention, LaserScan, MapGrid, MapMeta, MapRef, Odometry, Pose2D, PoseEstimate,
     StopReason, TaskEvent, TaskState, ValidationError, UNKNOWN_CELL,
 };
-pub use zenoh_io::{decode_sample, encoding_for, PublishError};
+pub use zenoh_io::{
+    decode_sample, encoding_for, loopback_pair, peer_config, PublishError, SessionError,
+};

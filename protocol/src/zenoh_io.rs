@@ -91,6 +91,83 @@ pub fn decode_sample<M: WireMessage>(sample: &Sample) -> Result<M, DecodeError> 
     decode(&sample.payload().to_bytes())
 }
 
+/// Why a Zenoh session could not be configured or opened.
+#[derive(Debug, thiserror::Error)]
+pub enum SessionError {
+    #[error("invalid zenoh {field} = {value}: {reason}")]
+    Config {
+        field: &'static str,
+        value: String,
+        reason: String,
+    },
+    #[error("cannot open zenoh session: {0}")]
+    Open(zenoh::Error),
+    #[error("zenoh session listens on no locator")]
+    NoLocator,
+}
+
+/// A peer configuration with explicit endpoints and multicast scouting off.
+///
+/// Fleet processes find each other through the endpoints they are given (a router between
+/// hosts, loopback on one host), never by multicast, so a test or a demo cannot pick up a
+/// stranger's session on the same network.
+///
+/// # Errors
+/// [`SessionError::Config`] naming the endpoint list that Zenoh refused.
+pub fn peer_config(listen: &[String], connect: &[String]) -> Result<zenoh::Config, SessionError> {
+    let mut config = zenoh::Config::default();
+    for (field, endpoints) in [("listen/endpoints", listen), ("connect/endpoints", connect)] {
+        if endpoints.is_empty() {
+            continue;
+        }
+        let value = serde_json::to_string(endpoints).map_err(|e| SessionError::Config {
+            field,
+            value: format!("{endpoints:?}"),
+            reason: e.to_string(),
+        })?;
+        config
+            .insert_json5(field, &value)
+            .map_err(|e| SessionError::Config {
+                field,
+                value: value.clone(),
+                reason: e.to_string(),
+            })?;
+    }
+    config
+        .insert_json5("scouting/multicast/enabled", "false")
+        .map_err(|e| SessionError::Config {
+            field: "scouting/multicast/enabled",
+            value: "false".into(),
+            reason: e.to_string(),
+        })?;
+    Ok(config)
+}
+
+/// Opens a session listening on `127.0.0.1:0` and a second session connected to it: two
+/// processes' worth of Zenoh on loopback with an OS-chosen port, for tests and local demos.
+///
+/// # Errors
+/// [`SessionError`] if either session cannot be opened.
+pub async fn loopback_pair() -> Result<(Session, Session), SessionError> {
+    let listener = zenoh::open(peer_config(&["tcp/127.0.0.1:0".to_string()], &[])?)
+        .await
+        .map_err(SessionError::Open)?;
+    let endpoints: Vec<String> = listener
+        .info()
+        .locators()
+        .await
+        .iter()
+        .map(ToString::to_string)
+        .collect();
+    if endpoints.is_empty() {
+        return Err(SessionError::NoLocator);
+    }
+    let connected = zenoh::open(peer_config(&[], &endpoints)?)
+        .await
+        .map_err(SessionError::Open)?;
+    Ok((listener, connected))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,8 +1,13 @@
 //! Robot agent: localization, controllers and the safety loop that commands the base.
 //!
-//! Today it holds the agent's configuration ([`config`]); AMCL, the controllers and the
-//! Zenoh loop come with the robot-agent issue.
+//! - [`amcl`]: AMCL localization on the floor plan's likelihood field.
+//! - [`controllers`]: the controller trait and the controllers that implement it.
+//! - [`config`]: the agent's configuration.
 
+pub mod amcl;
 pub mod config;
+pub mod controllers;
 
+pub use amcl::{Amcl, AmclConfig, Estimate, LikelihoodField, UpdateOutcome};
 pub use config::{AgentConfig, ControllerKind, Limits, Safety};
+pub use controllers::{Control, ControlInput, Controller, ControllerError};

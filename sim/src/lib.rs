@@ -1,1 +1,24 @@
 //! Simulator: the ground-truth world, a differential-drive base and its sensors.
+//!
+//! The stand-in for robots and buildings (Stage in the Intention-Net paper, §4):
+//! - [`scenario`]: the scenario file (floor plan + ground-truth extras + goals) and its schema;
+//! - [`world`]: the lock-step simulation ([`World::step`]) with collisions, LIDAR and odometry;
+//! - [`camera`]: the monocular camera renderer ([`World::render_camera`]);
+//! - [`mapgen`]: the generated floor plans and shipped scenarios;
+//! - [`driver`]: the real-time Zenoh driver; [`cli`]: the `sim` command line.
+
+pub mod appearance;
+pub mod camera;
+pub mod cli;
+pub mod config;
+pub mod driver;
+pub mod geom;
+pub mod mapgen;
+pub mod raycast;
+pub mod scenario;
+pub mod view;
+pub mod world;
+
+pub use config::SimConfig;
+pub use scenario::{Scenario, ScenarioError};
+pub use world::{Collision, Command, Observations, Obstacle, RobotObservation, SimError, World};

@@ -1,0 +1,384 @@
+//! The `sim` command line: render one frame, draw a world top-down, run the Zenoh driver,
+//! benchmark, (re)generate the shipped maps and scenarios, print the scenario schema.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use clap::{Parser, Subcommand};
+use protocol::{Pose2D, SiteId};
+use serde::Serialize;
+
+use crate::camera::{render, render_per_pixel};
+use crate::config::SimConfig;
+use crate::driver::{self, DriverConfig};
+use crate::world::{Command, World};
+
+/// Simulator for the intention fleet.
+#[derive(Debug, Parser)]
+#[command(name = "sim", version, about)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Cmd,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Cmd {
+    /// Render one camera frame (PNG) and optionally the LIDAR scan (JSON) at a pose.
+    Render {
+        #[arg(long)]
+        scenario: PathBuf,
+        /// x,y,yaw in the map frame (metres, radians).
+        #[arg(long, allow_hyphen_values = true)]
+        pose: String,
+        #[arg(long)]
+        out: PathBuf,
+        #[arg(long)]
+        scan_out: Option<PathBuf>,
+        /// Sensor/base settings YAML (see sim/config.example.yaml).
+        #[arg(long)]
+        config: Option<PathBuf>,
+    },
+    /// Draw the floor plan, ground-truth extras, start and goals top-down (PNG).
+    View {
+        #[arg(long)]
+        scenario: PathBuf,
+        #[arg(long)]
+        out: PathBuf,
+        /// Pixels per plan cell.
+        #[arg(long, default_value_t = 1)]
+        scale: u32,
+    },
+    /// Run the real-time Zenoh driver until Ctrl-C.
+    Run {
+        #[arg(long)]
+        scenario: PathBuf,
+        #[arg(long, default_value_t = 1)]
+        robots: usize,
+        #[arg(long, default_value = "default")]
+        site: String,
+        /// Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447.
+        #[arg(long)]
+        listen: Vec<String>,
+        /// Zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447.
+        #[arg(long)]
+        connect: Vec<String>,
+        #[arg(long)]
+        config: Option<PathBuf>,
+        #[arg(long, default_value_t = 20.0)]
+        odom_hz: f64,
+        #[arg(long, default_value_t = 10.0)]
+        scan_hz: f64,
+        #[arg(long, default_value_t = 10.0)]
+        camera_hz: f64,
+        #[arg(long, default_value_t = 500)]
+        cmd_timeout_ms: u64,
+    },
+    /// Measure camera frames/s and lock-step steps/s; writes JSON and prints a markdown table.
+    Bench {
+        #[arg(long)]
+        scenario: Option<PathBuf>,
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Frames rendered by the column renderer (the reference renders a tenth).
+        #[arg(long, default_value_t = 2000)]
+        frames: usize,
+    },
+    /// Regenerate the shipped floor plans and scenarios into a folder.
+    GenMaps {
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Print the scenario JSON Schema.
+    Schema,
+}
+
+fn parse_pose(text: &str) -> Result<Pose2D> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    if parts.len() != 3 {
+        bail!("invalid --pose {text:?}: expected x,y,yaw (three comma-separated numbers)");
+    }
+    let mut v = [0.0; 3];
+    for (slot, (name, part)) in v.iter_mut().zip(["x", "y", "yaw"].iter().zip(&parts)) {
+        *slot = part
+            .parse::<f64>()
+            .ok()
+            .filter(|f| f.is_finite())
+            .with_context(|| format!("invalid --pose {name} = {part:?}: not a finite number"))?;
+    }
+    Ok(Pose2D::new(v[0], v[1], v[2]))
+}
+
+fn load_config(path: Option<&Path>) -> Result<SimConfig> {
+    match path {
+        Some(p) => Ok(SimConfig::load(p)?),
+        None => Ok(SimConfig::default()),
+    }
+}
+
+/// Runs a parsed command line.
+///
+/// # Errors
+/// Any failure, with context naming the input at fault.
+pub fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Cmd::Render {
+            scenario,
+            pose,
+            out,
+            scan_out,
+            config,
+        } => {
+            let pose = parse_pose(&pose)?;
+            let mut world = World::from_scenario_file(&scenario, load_config(config.as_deref())?)?;
+            world.add_robot(protocol::RobotId::new("robot_1")?, pose)?;
+            let image = world.render_camera(0)?;
+            let img = image::RgbImage::from_raw(image.width_px, image.height_px, image.data)
+                .context("camera image has the wrong size")?;
+            img.save(&out)
+                .with_context(|| format!("cannot write {}", out.display()))?;
+            if let Some(scan_path) = scan_out {
+                let obs = world.step(&[Command::default()], 0.0);
+                let scan = obs
+                    .robots
+                    .first()
+                    .map(|o| o.scan.clone())
+                    .context("no robot in the world")?;
+                let text = serde_json::to_string_pretty(&scan)?;
+                std::fs::write(&scan_path, text)
+                    .with_context(|| format!("cannot write {}", scan_path.display()))?;
+            }
+            println!("wrote {}", out.display());
+            Ok(())
+        }
+        Cmd::View {
+            scenario,
+            out,
+            scale,
+        } => {
+            let world = World::from_scenario_file(&scenario, SimConfig::default())?;
+            crate::view::top_down(&world, scale)
+                .save(&out)
+                .with_context(|| format!("cannot write {}", out.display()))?;
+            println!("wrote {}", out.display());
+            Ok(())
+        }
+        Cmd::Run {
+            scenario,
+            robots,
+            site,
+            listen,
+            connect,
+            config,
+            odom_hz,
+            scan_hz,
+            camera_hz,
+            cmd_timeout_ms,
+        } => {
+            if robots == 0 {
+                bail!("invalid --robots 0: need at least one robot");
+            }
+            let site = SiteId::new(site)?;
+            let mut world = World::from_scenario_file(&scenario, load_config(config.as_deref())?)?;
+            world.add_robots_at_start(robots)?;
+            let driver_config = DriverConfig {
+                odom_hz,
+                scan_hz,
+                camera_hz,
+                cmd_timeout_ms,
+            };
+            driver_config.validate()?;
+            let rt = tokio::runtime::Runtime::new()?;
+            rt.block_on(async move {
+                let mut zc = zenoh::Config::default();
+                if !listen.is_empty() {
+                    zc.insert_json5("listen/endpoints", &serde_json::to_string(&listen)?)
+                        .map_err(|e| anyhow::anyhow!("invalid --listen {listen:?}: {e}"))?;
+                }
+                if !connect.is_empty() {
+                    zc.insert_json5("connect/endpoints", &serde_json::to_string(&connect)?)
+                        .map_err(|e| anyhow::anyhow!("invalid --connect {connect:?}: {e}"))?;
+                }
+                let session = zenoh::open(zc)
+                    .await
+                    .map_err(|e| anyhow::anyhow!("cannot open zenoh session: {e}"))?;
+                let shutdown = async {
+                    if let Err(e) = tokio::signal::ctrl_c().await {
+                        tracing::error!("cannot wait for Ctrl-C: {e}");
+                    }
+                };
+                driver::run(&session, world, &site, driver_config, shutdown).await?;
+                session
+                    .close()
+                    .await
+                    .map_err(|e| anyhow::anyhow!("closing zenoh: {e}"))?;
+                Ok(())
+            })
+        }
+        Cmd::Bench {
+            scenario,
+            out,
+            frames,
+        } => {
+            let scenario = scenario.unwrap_or_else(|| {
+                Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/task_b.yaml")
+            });
+            let result = bench(&scenario, frames.max(10))?;
+            println!("{}", result.markdown());
+            if let Some(out) = out {
+                std::fs::write(&out, serde_json::to_string_pretty(&result)?)
+                    .with_context(|| format!("cannot write {}", out.display()))?;
+            }
+            Ok(())
+        }
+        Cmd::GenMaps { out } => {
+            let files = crate::mapgen::generate(&out)?;
+            println!("wrote {} files under {}", files.len(), out.display());
+            Ok(())
+        }
+        Cmd::Schema => {
+            print!("{}", crate::scenario::json_schema());
+            Ok(())
+        }
+    }
+}
+
+/// Benchmark results.
+#[derive(Debug, Clone, Serialize)]
+pub struct BenchResult {
+    pub scenario: String,
+    pub width_px: u32,
+    pub height_px: u32,
+    pub column_frames: usize,
+    pub column_frames_per_s: f64,
+    pub per_pixel_frames: usize,
+    pub per_pixel_frames_per_s: f64,
+    pub speedup: f64,
+    pub lockstep_steps: usize,
+    /// Physics + LIDAR + odometry per step.
+    pub lockstep_steps_per_s: f64,
+    /// Physics + LIDAR + odometry + one camera frame per step.
+    pub lockstep_with_camera_steps_per_s: f64,
+    pub threads: usize,
+}
+
+impl BenchResult {
+    pub fn markdown(&self) -> String {
+        format!(
+            "| measurement ({}x{} px, {}) | rate |\n|---|---|\n\
+             | camera, column ray-caster (frames/s) | {:.0} |\n\
+             | camera, per-pixel reference (frames/s) | {:.1} |\n\
+             | speed-up of the column design | {:.0}x |\n\
+             | lock-step steps/s (scan + odom, 1 robot) | {:.0} |\n\
+             | lock-step steps/s (scan + odom + camera) | {:.0} |\n",
+            self.width_px,
+            self.height_px,
+            self.scenario,
+            self.column_frames_per_s,
+            self.per_pixel_frames_per_s,
+            self.speedup,
+            self.lockstep_steps_per_s,
+            self.lockstep_with_camera_steps_per_s
+        )
+    }
+}
+
+fn progress(n: usize, what: &str) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(n as u64);
+    if let Ok(style) = indicatif::ProgressStyle::with_template("{msg:>28} {bar:40} {pos}/{len}") {
+        bar.set_style(style);
+    }
+    bar.set_message(what.to_string());
+    bar
+}
+
+/// Poses along a scripted drive from the scenario start (the driving itself is not timed).
+fn bench_poses(world: &World, n: usize) -> Vec<Pose2D> {
+    let mut w = world.clone();
+    let mut poses = Vec::with_capacity(n);
+    for k in 0..n {
+        #[allow(clippy::cast_precision_loss)]
+        let t = k as f64 * 0.1;
+        let cmd = Command {
+            v_mps: 0.8,
+            omega_radps: 0.6 * (0.3 * t).sin(),
+        };
+        let obs = w.step(&[cmd], 0.1);
+        poses.push(obs.robots[0].ground_truth_pose);
+    }
+    poses
+}
+
+/// Runs the benchmark on one core.
+///
+/// # Errors
+/// Scenario loading or robot placement failures.
+pub fn bench(scenario: &Path, frames: usize) -> Result<BenchResult> {
+    let mut world = World::from_scenario_file(scenario, SimConfig::default())?;
+    world.add_robot(
+        protocol::RobotId::new("robot_1")?,
+        world.scenario.start.to_pose(),
+    )?;
+    let poses = bench_poses(&world, 200);
+    let model = world.camera_model().clone();
+    let mut buf = Vec::new();
+
+    let bar = progress(frames, "column renderer");
+    let t0 = Instant::now();
+    for k in 0..frames {
+        render(&world, &model, poses[k % poses.len()], Some(0), &mut buf);
+        if k % 64 == 0 {
+            bar.set_position(k as u64);
+        }
+    }
+    let column_s = t0.elapsed().as_secs_f64();
+    bar.finish_and_clear();
+
+    let ref_frames = (frames / 100).max(3);
+    let bar = progress(ref_frames, "per-pixel reference");
+    let t0 = Instant::now();
+    for k in 0..ref_frames {
+        render_per_pixel(&world, &model, poses[k % poses.len()], Some(0), &mut buf);
+        bar.inc(1);
+    }
+    let ref_s = t0.elapsed().as_secs_f64();
+    bar.finish_and_clear();
+
+    let steps = frames;
+    let mut w = world.clone();
+    let cmd = [Command {
+        v_mps: 0.5,
+        omega_radps: 0.3,
+    }];
+    let t0 = Instant::now();
+    for _ in 0..steps {
+        let _ = w.step(&cmd, 0.05);
+    }
+    let step_s = t0.elapsed().as_secs_f64();
+    let mut w = world.clone();
+    let t0 = Instant::now();
+    for _ in 0..steps {
+        let _ = w.step(&cmd, 0.05);
+        let _ = w.render_camera(0)?;
+    }
+    let step_cam_s = t0.elapsed().as_secs_f64();
+
+    #[allow(clippy::cast_precision_loss)]
+    let rate = |n: usize, s: f64| n as f64 / s.max(1e-12);
+    let column = rate(frames, column_s);
+    let per_pixel = rate(ref_frames, ref_s);
+    Ok(BenchResult {
+        scenario: world.scenario.name.clone(),
+        width_px: world.config.camera.width_px,
+        height_px: world.config.camera.height_px,
+        column_frames: frames,
+        column_frames_per_s: column,
+        per_pixel_frames: ref_frames,
+        per_pixel_frames_per_s: per_pixel,
+        speedup: column / per_pixel.max(1e-12),
+        lockstep_steps: steps,
+        lockstep_steps_per_s: rate(steps, step_s),
+        lockstep_with_camera_steps_per_s: rate(steps, step_cam_s),
+        threads: 1,
+    })
+}
