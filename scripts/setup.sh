@@ -6,3 +6,23 @@ cd "$(dirname "$0")/.."
 
 # Fetch all crates up front so a network hiccup fails here, not half-way through the tests.
 cargo fetch --locked
+
+# ONNX Runtime for the robot agent's intention-net controllers. `ort` is built with
+# `load-dynamic`, so the shared library is opened at run time; it comes from the PyPI wheel
+# (the same version Python uses to compute the fixtures' expected outputs). ort 2.0.0-rc.15
+# speaks the ONNX Runtime 1.31 API. The agent looks for
+# .venv/lib/python3*/site-packages/onnxruntime/capi/libonnxruntime.so* unless ORT_DYLIB_PATH
+# is set.
+ORT_VERSION="1.31.1"
+PYTHON="${PYTHON:-python3}"
+if [ ! -x .venv/bin/python ]; then
+  "$PYTHON" -m venv .venv
+fi
+installed="$(.venv/bin/python -c 'import importlib.metadata as m; print(m.version("onnxruntime"))' 2>/dev/null || true)"
+if [ "$installed" != "$ORT_VERSION" ]; then
+  .venv/bin/python -m pip install --quiet --disable-pip-version-check "onnxruntime==${ORT_VERSION}"
+fi
+if ! compgen -G ".venv/lib/python3*/site-packages/onnxruntime/capi/libonnxruntime.so*" >/dev/null; then
+  echo "error: onnxruntime ${ORT_VERSION} installed, but no libonnxruntime.so* under .venv/lib/python3*/site-packages/onnxruntime/capi/" >&2
+  exit 1
+fi

@@ -64,7 +64,7 @@ fn bench_update(c: &mut Criterion) {
             b.iter(|| {
                 // Alternate 0.3 m back and forth so that every call passes the update gate.
                 k += 1;
-                let x = if k % 2 == 0 { 0.0 } else { 0.3 };
+                let x = if k.is_multiple_of(2) { 0.0 } else { 0.3 };
                 black_box(amcl.update(&odom(x), Some(&scan)).expect("update"))
             });
         });

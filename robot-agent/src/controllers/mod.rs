@@ -6,6 +6,16 @@
 //! [`Limits`] (the networks are trained on normalized outputs, DESIGN §5) and applies the
 //! safety rules on top; controllers never see stale-intention or localization logic.
 
+pub mod dynamic_window;
+pub mod intention_net;
+pub mod path_tracker;
+
+pub use dynamic_window::{Choice, DynamicWindow, DynamicWindowConfig};
+pub use intention_net::{
+    IntentionNet, IntentionNetError, IntentionNetOptions, ModelCard, ModelExpectation, ModelKind,
+};
+pub use path_tracker::{PathTracker, PathTrackerConfig};
+
 use protocol::{CameraFrame, Intention, LaserScan, Pose2D};
 
 use crate::config::{ControllerKind, Limits};

@@ -1,0 +1,10 @@
+//! Intentions (paper §3.1, DESIGN.md §4): what the planner expects the controller to do next.
+//!
+//! - [`dlm`]: the discretized local move from the signed curvature of the path ahead.
+//! - [`lpe`]: the local path and environment image (224 x 224 RGB, heading-up).
+
+pub mod dlm;
+pub mod lpe;
+
+pub use dlm::{dlm_from_path, DlmParams};
+pub use lpe::{render_lpe, LpeImage, LpeParams};

@@ -1,0 +1,591 @@
+//! Hybrid A* (Dolgov, Thrun, Montemerlo, Diebel 2010) for a differential-drive robot.
+//!
+//! States are continuous (x, y, yaw) in the grid frame; the closed set is a lattice of
+//! `xy_resolution_m` cells and `heading_bins` headings, and a lattice cell keeps the first
+//! (cheapest) continuous state that reaches it. Motion primitives: forward arcs of curvature
+//! 0, ±1/(2 R) and ±1/R (R = minimum turning radius), the same in reverse when enabled, and
+//! turns in place when enabled, each with its cost in metres. The heuristic is
+//! max(non-holonomic distance without obstacles, 2-D distance with obstacles); the latter is
+//! the per-goal cached [`super::heuristic::ObstacleHeuristic`]. Analytic expansion tries a
+//! collision-checked Dubins curve to the goal every `analytic_expansion_every` expansions and
+//! on every expansion near the goal. The result is shortcut-smoothed ([`super::smoother`]).
+//!
+//! A [`Planner`] is one robot's reusable state (node, open and closed buffers keep their
+//! capacity between plans); the [`PlanningMap`] it plans on is shared between robots and
+//! threads.
+
+use std::collections::{BinaryHeap, HashMap};
+use std::f64::consts::{SQRT_2, TAU};
+use std::hash::{BuildHasherDefault, Hasher};
+use std::sync::{Arc, PoisonError};
+use std::time::Instant;
+
+use protocol::{normalize_angle, Pose2D};
+
+use super::config::PlannerConfig;
+use super::dubins::DubinsPath;
+use super::error::{Endpoint, PlanError};
+use super::heuristic::{MinKey, ObstacleHeuristic};
+use super::map::{GridPose, PlanningMap};
+use super::path::{Path, PathStats};
+use super::smoother;
+
+/// Multiply-shift hasher for the lattice keys: SipHash would cost more than the search step.
+#[derive(Default)]
+struct LatticeHasher(u64);
+
+impl Hasher for LatticeHasher {
+    fn finish(&self) -> u64 {
+        self.0 ^ (self.0 >> 29)
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(u64::from(b));
+        }
+    }
+    fn write_u64(&mut self, i: u64) {
+        self.0 = (self.0.rotate_left(5) ^ i).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    }
+}
+
+type LatticeMap = HashMap<u64, BinState, BuildHasherDefault<LatticeHasher>>;
+
+#[derive(Debug, Clone, Copy)]
+struct BinState {
+    g: f64,
+    closed: bool,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Primitive {
+    /// Signed curvature (1/m), positive to the left.
+    curvature: f64,
+    /// Signed arc length; negative drives backwards. Zero for a turn in place.
+    length_m: f64,
+    /// Heading change of a turn in place; zero otherwise.
+    rotate_rad: f64,
+    cost_m: f64,
+    reverse: bool,
+}
+
+impl Primitive {
+    #[inline]
+    fn apply(&self, x: f64, y: f64, yaw: f64, t: f64) -> (f64, f64, f64) {
+        if self.rotate_rad != 0.0 {
+            return (x, y, yaw + self.rotate_rad * t);
+        }
+        let s = self.length_m * t;
+        if self.curvature.abs() < 1e-12 {
+            let (sn, cs) = yaw.sin_cos();
+            (x + s * cs, y + s * sn, yaw)
+        } else {
+            let k = self.curvature;
+            let yaw2 = yaw + k * s;
+            (
+                x + (yaw2.sin() - yaw.sin()) / k,
+                y - (yaw2.cos() - yaw.cos()) / k,
+                yaw2,
+            )
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Node {
+    x: f64,
+    y: f64,
+    yaw: f64,
+    g: f64,
+    h_obstacle: f64,
+    parent: u32,
+    prim: u16,
+    reverse: bool,
+}
+
+const NO_PARENT: u32 = u32::MAX;
+const NO_PRIM: u16 = u16::MAX;
+/// Heading step between output poses of a turn in place.
+const ROTATION_SAMPLE_RAD: f64 = 0.1;
+
+enum Ending {
+    /// The node is within tolerance (position and heading).
+    Node(usize),
+    /// The node is within position tolerance; turn in place to the goal heading.
+    NodeThenRotate(usize),
+    /// A collision-free Dubins curve from the node reaches the goal exactly.
+    Analytic(usize, DubinsPath),
+}
+
+/// One robot's planner (see the module docs).
+#[derive(Debug)]
+pub struct Planner {
+    map: Arc<PlanningMap>,
+    config: PlannerConfig,
+    prims: Vec<Primitive>,
+    nodes: Vec<Node>,
+    open: BinaryHeap<MinKey>,
+    lattice: LatticeMap,
+}
+
+impl Planner {
+    /// A planner for one robot on a shared planning map.
+    ///
+    /// # Errors
+    /// [`PlanError::InvalidConfig`] for a bad configuration, [`PlanError::RadiusMismatch`]
+    /// when the map was inflated for another robot radius.
+    pub fn new(map: Arc<PlanningMap>, config: PlannerConfig) -> Result<Self, PlanError> {
+        config.validate()?;
+        if (map.robot_radius_m() - config.robot_radius_m).abs() > 1e-9 {
+            return Err(PlanError::RadiusMismatch {
+                map_m: map.robot_radius_m(),
+                config_m: config.robot_radius_m,
+            });
+        }
+        let prims = primitives(&config);
+        Ok(Self {
+            map,
+            config,
+            prims,
+            nodes: Vec::new(),
+            open: BinaryHeap::new(),
+            lattice: LatticeMap::default(),
+        })
+    }
+
+    #[must_use]
+    pub fn config(&self) -> &PlannerConfig {
+        &self.config
+    }
+
+    #[must_use]
+    pub fn map(&self) -> &Arc<PlanningMap> {
+        &self.map
+    }
+
+    /// Replaces the map (a new map version); the search buffers are kept.
+    ///
+    /// # Errors
+    /// [`PlanError::RadiusMismatch`] when the map was inflated for another robot radius.
+    pub fn set_map(&mut self, map: Arc<PlanningMap>) -> Result<(), PlanError> {
+        if (map.robot_radius_m() - self.config.robot_radius_m).abs() > 1e-9 {
+            return Err(PlanError::RadiusMismatch {
+                map_m: map.robot_radius_m(),
+                config_m: self.config.robot_radius_m,
+            });
+        }
+        self.map = map;
+        Ok(())
+    }
+
+    fn lattice_key(&self, x: f64, y: f64, yaw: f64) -> u64 {
+        let r = self.config.xy_resolution_m;
+        let bins = f64::from(self.config.heading_bins);
+        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+        let (cx, cy) = (
+            (x / r).floor().max(0.0) as u64,
+            (y / r).floor().max(0.0) as u64,
+        );
+        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+        let bin = ((yaw.rem_euclid(TAU) / TAU * bins).round() as u64)
+            % u64::from(self.config.heading_bins);
+        (cx << 40) | (cy << 16) | bin
+    }
+
+    fn obstacle_h(&self, heur: &mut ObstacleHeuristic, x: f64, y: f64) -> f64 {
+        let coarse = self.map.coarse();
+        let d = heur.distance_cells(coarse, self.map.coarse_cell(x, y));
+        if d.is_infinite() {
+            f64::INFINITY
+        } else {
+            // Both ends may lie anywhere in their coarse cells.
+            ((f64::from(d) - SQRT_2) * coarse.cell_m).max(0.0)
+        }
+    }
+
+    fn holonomic_h(&self, x: f64, y: f64, yaw: f64, goal: GridPose) -> f64 {
+        if self.config.allow_turn_in_place || self.config.allow_reverse {
+            // Turning in place (or Reeds-Shepp cusps) can beat Dubins; Euclidean is the
+            // bound that stays admissible.
+            (goal.x_m - x).hypot(goal.y_m - y)
+        } else {
+            DubinsPath::shortest(
+                (x, y, yaw),
+                (goal.x_m, goal.y_m, goal.yaw_rad),
+                self.config.min_turning_radius_m,
+            )
+            .map_or(0.0, |d| d.length_m())
+        }
+    }
+
+    /// Plans from `start` to `goal` (map frame) on the planner's map within the time budget.
+    ///
+    /// # Errors
+    /// [`PlanError`] with the reason: an endpoint not finite, off the map or in an obstacle
+    /// (with its clearance), the goal unreachable (with the states explored), or the budget
+    /// exceeded.
+    pub fn plan(&mut self, start: Pose2D, goal: Pose2D) -> Result<Path, PlanError> {
+        let t0 = Instant::now();
+        let map = Arc::clone(&self.map);
+        let s = map.check_endpoint(Endpoint::Start, start)?;
+        let g = map.check_endpoint(Endpoint::Goal, goal)?;
+        let (shared, cache_hit) =
+            map.obstacle_heuristic(map.coarse_cell(g.x_m, g.y_m), map.coarse_cell(s.x_m, s.y_m));
+        // Held for the whole plan: robots with the same goal take turns, and the search does
+        // not pay a lock per heuristic query.
+        let mut heur = shared.lock().unwrap_or_else(PoisonError::into_inner);
+
+        let h0 = self.obstacle_h(&mut heur, s.x_m, s.y_m);
+        if h0.is_infinite() {
+            return Err(PlanError::Unreachable {
+                states_expanded: heur.settled(),
+                reason: "no 2-D route between start and goal in the inflated map",
+            });
+        }
+
+        let (ending, expanded) = self.search(&mut heur, s, g, h0, t0)?;
+        let settled = heur.settled();
+        drop(heur);
+
+        let analytic = matches!(ending, Ending::Analytic(..));
+        let mut grid_poses = self.reconstruct(&ending, g);
+        let raw_length_m = grid_length(&grid_poses);
+        if self.config.smooth {
+            grid_poses = smoother::shortcut(
+                &map,
+                &grid_poses,
+                self.config.min_turning_radius_m,
+                self.config.path_spacing_m,
+            );
+        }
+        let mut poses: Vec<Pose2D> = grid_poses.iter().map(|p| map.to_world(*p)).collect();
+        if let Some(first) = poses.first_mut() {
+            *first = Pose2D::new(start.x_m, start.y_m, normalize_angle(start.yaw_rad));
+        }
+        if analytic || matches!(ending, Ending::NodeThenRotate(_)) {
+            if let Some(last) = poses.last_mut() {
+                if last.distance_m(&goal) < 1e-6 {
+                    *last = Pose2D::new(goal.x_m, goal.y_m, normalize_angle(goal.yaw_rad));
+                }
+            }
+        }
+        let length_m = super::path::length_of(&poses);
+        #[allow(clippy::cast_possible_truncation)]
+        let plan_time_us = t0.elapsed().as_micros() as u64;
+        Ok(Path {
+            poses,
+            length_m,
+            states_expanded: expanded,
+            plan_time_us,
+            stats: PathStats {
+                heuristic_cache_hit: cache_hit,
+                heuristic_cells_settled: settled,
+                analytic_expansion: analytic,
+                raw_length_m,
+            },
+        })
+    }
+
+    fn search(
+        &mut self,
+        heur: &mut ObstacleHeuristic,
+        s: GridPose,
+        goal: GridPose,
+        h0: f64,
+        t0: Instant,
+    ) -> Result<(Ending, u64), PlanError> {
+        self.nodes.clear();
+        self.open.clear();
+        self.lattice.clear();
+        let w = self.config.heuristic_weight;
+        let budget = std::time::Duration::from_millis(self.config.time_budget_ms);
+        let rho = self.config.min_turning_radius_m;
+        let goal_q = (goal.x_m, goal.y_m, goal.yaw_rad);
+
+        self.nodes.push(Node {
+            x: s.x_m,
+            y: s.y_m,
+            yaw: s.yaw_rad,
+            g: 0.0,
+            h_obstacle: h0,
+            parent: NO_PARENT,
+            prim: NO_PRIM,
+            reverse: false,
+        });
+        self.lattice.insert(
+            self.lattice_key(s.x_m, s.y_m, s.yaw_rad),
+            BinState {
+                g: 0.0,
+                closed: false,
+            },
+        );
+        let h_start = h0.max(self.holonomic_h(s.x_m, s.y_m, s.yaw_rad, goal));
+        #[allow(clippy::cast_possible_truncation)]
+        self.open.push(MinKey::new((w * h_start) as f32, 0));
+
+        let mut expanded = 0u64;
+        while let Some(top) = self.open.pop() {
+            let ni = top.idx() as usize;
+            let n = self.nodes[ni];
+            let key = self.lattice_key(n.x, n.y, n.yaw);
+            match self.lattice.get_mut(&key) {
+                Some(b) if !b.closed && n.g <= b.g + 1e-9 => b.closed = true,
+                _ => continue,
+            }
+            expanded += 1;
+            if expanded & 63 == 0 {
+                let elapsed = t0.elapsed();
+                if elapsed > budget {
+                    return Err(budget_error(
+                        format!("time budget {} ms", self.config.time_budget_ms),
+                        elapsed,
+                        expanded,
+                    ));
+                }
+            }
+            if expanded > self.config.max_expansions {
+                return Err(budget_error(
+                    format!("max_expansions {}", self.config.max_expansions),
+                    t0.elapsed(),
+                    expanded,
+                ));
+            }
+
+            // Goal test.
+            if (n.x - goal.x_m).hypot(n.y - goal.y_m) <= self.config.goal_position_tolerance_m {
+                if normalize_angle(n.yaw - goal.yaw_rad).abs() <= self.config.goal_yaw_tolerance_rad
+                {
+                    return Ok((Ending::Node(ni), expanded));
+                }
+                if self.config.allow_turn_in_place {
+                    return Ok((Ending::NodeThenRotate(ni), expanded));
+                }
+            }
+
+            // Analytic expansion.
+            if expanded % u64::from(self.config.analytic_expansion_every) == 1
+                || n.h_obstacle < self.config.analytic_near_goal_m
+            {
+                if let Some(d) = DubinsPath::shortest((n.x, n.y, n.yaw), goal_q, rho) {
+                    let free = self
+                        .map
+                        .curve_free(d.length_m(), self.config.path_spacing_m, |t| {
+                            let q = d.sample(t);
+                            (q.0, q.1)
+                        });
+                    if free {
+                        return Ok((Ending::Analytic(ni, d), expanded));
+                    }
+                }
+            }
+
+            // Successors.
+            for pi in 0..self.prims.len() {
+                let prim = self.prims[pi];
+                let (x2, y2, yaw2) = prim.apply(n.x, n.y, n.yaw, 1.0);
+                let (cx, cy) = self.map.cell_of(x2, y2);
+                if !self.map.grid().contains(cx, cy) {
+                    continue;
+                }
+                let key2 = self.lattice_key(x2, y2, yaw2);
+                if key2 == key {
+                    continue;
+                }
+                let mut cost = prim.cost_m;
+                if ni != 0 && prim.reverse != n.reverse && prim.rotate_rad == 0.0 {
+                    cost += self.config.direction_switch_cost_m;
+                }
+                let g2 = n.g + cost;
+                if let Some(b) = self.lattice.get(&key2) {
+                    if b.closed || b.g <= g2 {
+                        continue;
+                    }
+                }
+                if prim.rotate_rad == 0.0 {
+                    let free =
+                        self.map
+                            .curve_free(prim.length_m.abs(), self.config.path_spacing_m, |t| {
+                                let q = prim.apply(n.x, n.y, n.yaw, t / prim.length_m.abs());
+                                (q.0, q.1)
+                            });
+                    if !free {
+                        continue;
+                    }
+                }
+                let h_obstacle = if prim.rotate_rad == 0.0 {
+                    self.obstacle_h(heur, x2, y2)
+                } else {
+                    n.h_obstacle
+                };
+                if h_obstacle.is_infinite() {
+                    continue;
+                }
+                let h = h_obstacle.max(self.holonomic_h(x2, y2, yaw2, goal));
+                self.lattice.insert(
+                    key2,
+                    BinState {
+                        g: g2,
+                        closed: false,
+                    },
+                );
+                let reverse = if prim.rotate_rad == 0.0 {
+                    prim.reverse
+                } else {
+                    n.reverse
+                };
+                #[allow(clippy::cast_possible_truncation)]
+                let idx = self.nodes.len() as u32;
+                self.nodes.push(Node {
+                    x: x2,
+                    y: y2,
+                    yaw: normalize_angle(yaw2),
+                    g: g2,
+                    h_obstacle,
+                    #[allow(clippy::cast_possible_truncation)]
+                    parent: ni as u32,
+                    #[allow(clippy::cast_possible_truncation)]
+                    prim: pi as u16,
+                    reverse,
+                });
+                #[allow(clippy::cast_possible_truncation)]
+                self.open.push(MinKey::new((g2 + w * h) as f32, idx));
+            }
+        }
+        Err(PlanError::Unreachable {
+            states_expanded: expanded,
+            reason: "hybrid A* search space exhausted",
+        })
+    }
+
+    /// Grid-frame poses from the start to the end of the search, `path_spacing_m` apart.
+    fn reconstruct(&self, ending: &Ending, goal: GridPose) -> Vec<GridPose> {
+        let last = match ending {
+            Ending::Node(i) | Ending::NodeThenRotate(i) | Ending::Analytic(i, _) => *i,
+        };
+        let mut chain = Vec::new();
+        let mut i = last;
+        loop {
+            chain.push(i);
+            let p = self.nodes[i].parent;
+            if p == NO_PARENT {
+                break;
+            }
+            i = p as usize;
+        }
+        chain.reverse();
+        let spacing = self.config.path_spacing_m;
+        let first = self.nodes[chain[0]];
+        let mut out = vec![GridPose {
+            x_m: first.x,
+            y_m: first.y,
+            yaw_rad: first.yaw,
+        }];
+        for pair in chain.windows(2) {
+            let a = self.nodes[pair[0]];
+            let b = self.nodes[pair[1]];
+            let prim = self.prims[usize::from(b.prim)];
+            let steps = if prim.rotate_rad == 0.0 {
+                (prim.length_m.abs() / spacing).ceil().max(1.0)
+            } else {
+                (prim.rotate_rad.abs() / ROTATION_SAMPLE_RAD)
+                    .ceil()
+                    .max(1.0)
+            };
+            #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+            let n = steps as u32;
+            for j in 1..=n {
+                let q = prim.apply(a.x, a.y, a.yaw, f64::from(j) / steps);
+                out.push(GridPose {
+                    x_m: q.0,
+                    y_m: q.1,
+                    yaw_rad: normalize_angle(q.2),
+                });
+            }
+        }
+        match ending {
+            Ending::Node(_) => {}
+            Ending::NodeThenRotate(_) => {
+                let from = out.last().copied().unwrap_or(goal);
+                let d = normalize_angle(goal.yaw_rad - from.yaw_rad);
+                let steps = (d.abs() / ROTATION_SAMPLE_RAD).ceil().max(1.0);
+                #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+                for j in 1..=(steps as u32) {
+                    out.push(GridPose {
+                        x_m: from.x_m,
+                        y_m: from.y_m,
+                        yaw_rad: normalize_angle(from.yaw_rad + d * f64::from(j) / steps),
+                    });
+                }
+            }
+            Ending::Analytic(_, d) => {
+                let len = d.length_m();
+                let steps = (len / spacing).ceil().max(1.0);
+                #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+                for j in 1..=(steps as u32) {
+                    let q = d.sample(len * f64::from(j) / steps);
+                    out.push(GridPose {
+                        x_m: q.0,
+                        y_m: q.1,
+                        yaw_rad: normalize_angle(q.2),
+                    });
+                }
+            }
+        }
+        out
+    }
+}
+
+fn budget_error(limit: String, elapsed: std::time::Duration, expanded: u64) -> PlanError {
+    #[allow(clippy::cast_possible_truncation)]
+    let elapsed_ms = elapsed.as_millis() as u64;
+    PlanError::BudgetExceeded {
+        limit,
+        elapsed_ms,
+        states_expanded: expanded,
+    }
+}
+
+fn grid_length(poses: &[GridPose]) -> f64 {
+    poses
+        .windows(2)
+        .map(|w| (w[1].x_m - w[0].x_m).hypot(w[1].y_m - w[0].y_m))
+        .sum()
+}
+
+fn primitives(c: &PlannerConfig) -> Vec<Primitive> {
+    let k = 1.0 / c.min_turning_radius_m;
+    let mut out = Vec::new();
+    let mut directions = vec![false];
+    if c.allow_reverse {
+        directions.push(true);
+    }
+    for reverse in directions {
+        for curvature in [0.0, k * 0.5, -k * 0.5, k, -k] {
+            let mut cost = c.step_m;
+            if curvature != 0.0 {
+                cost *= c.turn_cost_factor;
+            }
+            if reverse {
+                cost *= c.reverse_cost_factor;
+            }
+            out.push(Primitive {
+                curvature,
+                length_m: if reverse { -c.step_m } else { c.step_m },
+                rotate_rad: 0.0,
+                cost_m: cost,
+                reverse,
+            });
+        }
+    }
+    if c.allow_turn_in_place {
+        for rotate_rad in [c.turn_in_place_step_rad, -c.turn_in_place_step_rad] {
+            out.push(Primitive {
+                curvature: 0.0,
+                length_m: 0.0,
+                rotate_rad,
+                cost_m: c.turn_in_place_cost_m_per_rad * c.turn_in_place_step_rad,
+                reverse: false,
+            });
+        }
+    }
+    out
+}

@@ -1,0 +1,39 @@
+//! The planner's output.
+
+use protocol::Pose2D;
+use serde::Serialize;
+
+/// A planned path in the map frame with how it was found.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Path {
+    /// Poses from the start to the goal, about `path_spacing_m` apart (turns in place add
+    /// poses at one position).
+    pub poses: Vec<Pose2D>,
+    /// Driven length (turns in place count zero).
+    pub length_m: f64,
+    /// Hybrid A* nodes expanded.
+    pub states_expanded: u64,
+    /// Wall-clock planning time.
+    pub plan_time_us: u64,
+    /// Statistics of the search.
+    pub stats: PathStats,
+}
+
+/// Details of one plan, for benchmarks and logs.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct PathStats {
+    /// The obstacle heuristic for this goal came from the cache.
+    pub heuristic_cache_hit: bool,
+    /// Coarse cells the obstacle heuristic had closed after this plan (all queries so far).
+    pub heuristic_cells_settled: u64,
+    /// The search ended with an analytic (Dubins) shot rather than a lattice node.
+    pub analytic_expansion: bool,
+    /// Length before smoothing.
+    pub raw_length_m: f64,
+}
+
+/// Driven length of a pose sequence.
+#[must_use]
+pub fn length_of(poses: &[Pose2D]) -> f64 {
+    poses.windows(2).map(|w| w[0].distance_m(&w[1])).sum()
+}

@@ -1,0 +1,103 @@
+//! Time per control step of the dynamic window controller on the Nav2 depot map (181-beam
+//! ray-cast scan with an unmapped box on the path), against references in the same run: the
+//! same controller without the local navigation function (plain Fox), with a denser window
+//! (21 x 41 samples), and the pure-pursuit path tracker.
+//!
+//! Run: `cargo bench -p robot-agent --bench controllers`
+
+// A benchmark whose setup fails has nothing to measure: aborting with the reason is right.
+#![allow(clippy::expect_used)]
+
+#[path = "../tests/amcl_world/mod.rs"]
+mod amcl_world;
+
+use std::hint::black_box;
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use protocol::{Dlm, Header, Intention, MapName, MapRef, Pose2D};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use robot_agent::controllers::{
+    ControlInput, Controller, DynamicWindow, DynamicWindowConfig, PathTracker, PathTrackerConfig,
+};
+use robot_agent::Limits;
+
+fn bench_step(c: &mut Criterion) {
+    let mut truth = amcl_world::load_nav2("depot");
+    amcl_world::add_box(&mut truth, 7.0, 7.5, 0.6, 0.6, 0.0);
+    // 1.5 m before the box, cruising: the box hides the look-ahead point, the detour is searched.
+    let pose = Pose2D::new(5.2, 7.5, 0.0);
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let scan = amcl_world::Laser::default().scan(&truth, &pose, 0, &mut rng);
+    let path: Vec<Pose2D> = (0..=100)
+        .map(|i| Pose2D::new(2.0 + 0.1 * f64::from(i), 7.5, 0.0))
+        .collect();
+    let intention = Intention {
+        header: Header::default(),
+        task_id: None,
+        goal_index: 0,
+        answers_pose_seq: 0,
+        answers_pose_stamp_ns: 0,
+        map: MapRef {
+            name: MapName::new("depot").expect("map name"),
+            version: 1,
+        },
+        path,
+        dlm: Dlm::GoForward,
+        lpe: None,
+    };
+    let limits = Limits::default();
+    let input = ControlInput {
+        pose,
+        v_mps: 0.6,
+        omega_radps: 0.0,
+        scan: Some(&scan),
+        camera: None,
+        intention: Some(&intention),
+        limits: &limits,
+        dt_s: 0.1,
+    };
+    let default = DynamicWindowConfig::default();
+    let cases: [(&str, Box<dyn Controller>); 4] = [
+        (
+            "dwa_default_11x21",
+            Box::new(DynamicWindow::new(default).expect("config")),
+        ),
+        (
+            "dwa_plain_fox_no_nav_grid",
+            Box::new(
+                DynamicWindow::new(DynamicWindowConfig {
+                    local_grid_resolution_m: 0.0,
+                    ..default
+                })
+                .expect("config"),
+            ),
+        ),
+        (
+            "dwa_dense_21x41",
+            Box::new(
+                DynamicWindow::new(DynamicWindowConfig {
+                    v_samples: 21,
+                    omega_samples: 41,
+                    ..default
+                })
+                .expect("config"),
+            ),
+        ),
+        (
+            "path_tracker",
+            Box::new(PathTracker::new(PathTrackerConfig::default()).expect("config")),
+        ),
+    ];
+    let mut group = c.benchmark_group("control_step");
+    group.sample_size(30);
+    for (name, mut controller) in cases {
+        group.bench_function(name, |b| {
+            b.iter(|| black_box(controller.control(black_box(&input)).expect("control")));
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_step);
+criterion_main!(benches);
