@@ -50,18 +50,21 @@ pub struct CellCounts {
     pub unknown: u64,
 }
 
-/// An occupancy grid with its placement in the map frame.
-#[derive(Debug, Clone, PartialEq)]
-pub struct OccupancyGrid {
+/// Where a grid lies in the map frame: size, resolution and origin, with the origin's rotation
+/// cached. Every raster over a floor plan (the occupancy grid, AMCL's likelihood field, the
+/// simulator's wall grid) converts coordinates through this one type.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GridGeometry {
     width_cells: u32,
     height_cells: u32,
     resolution_m: f64,
     origin: Pose2D,
-    cells: Vec<u8>,
+    cos_yaw: f64,
+    sin_yaw: f64,
 }
 
-impl OccupancyGrid {
-    /// Builds a grid, checking that the cell buffer, size and resolution agree.
+impl GridGeometry {
+    /// Checks size, resolution and origin.
     ///
     /// # Errors
     /// [`MapError::Invalid`] naming the offending field and value.
@@ -70,7 +73,6 @@ impl OccupancyGrid {
         height_cells: u32,
         resolution_m: f64,
         origin: Pose2D,
-        cells: Vec<u8>,
     ) -> Result<Self, MapError> {
         if width_cells == 0 || height_cells == 0 {
             return Err(MapError::invalid(
@@ -95,7 +97,160 @@ impl OccupancyGrid {
                 return Err(MapError::invalid(field, v, "must be finite"));
             }
         }
-        let expected = width_cells as usize * height_cells as usize;
+        let (sin_yaw, cos_yaw) = origin.yaw_rad.sin_cos();
+        Ok(Self {
+            width_cells,
+            height_cells,
+            resolution_m,
+            origin,
+            cos_yaw,
+            sin_yaw,
+        })
+    }
+
+    #[inline]
+    #[must_use]
+    pub fn width_cells(&self) -> u32 {
+        self.width_cells
+    }
+
+    #[inline]
+    #[must_use]
+    pub fn height_cells(&self) -> u32 {
+        self.height_cells
+    }
+
+    #[inline]
+    #[must_use]
+    pub fn resolution_m(&self) -> f64 {
+        self.resolution_m
+    }
+
+    /// Pose of the lower-left corner of cell (0, 0) in the map frame.
+    #[inline]
+    #[must_use]
+    pub fn origin(&self) -> Pose2D {
+        self.origin
+    }
+
+    /// Number of cells.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.width_cells as usize * self.height_cells as usize
+    }
+
+    /// Never true: a geometry has at least one cell.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Width and height of the mapped area in metres.
+    #[must_use]
+    pub fn extent_m(&self) -> (f64, f64) {
+        (
+            f64::from(self.width_cells) * self.resolution_m,
+            f64::from(self.height_cells) * self.resolution_m,
+        )
+    }
+
+    /// Linear index of cell (cx, cy); callers guarantee bounds.
+    #[inline]
+    #[must_use]
+    pub fn index(&self, cx: u32, cy: u32) -> usize {
+        cy as usize * self.width_cells as usize + cx as usize
+    }
+
+    /// Linear index of cell (cx, cy), or `None` off the grid.
+    #[inline]
+    #[must_use]
+    pub fn checked_index(&self, cx: i64, cy: i64) -> Option<usize> {
+        // In bounds once `contains` holds, so the casts are lossless.
+        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+        self.contains(cx, cy)
+            .then(|| self.index(cx as u32, cy as u32))
+    }
+
+    /// Whether the cell lies on the grid.
+    #[inline]
+    #[must_use]
+    pub fn contains(&self, cx: i64, cy: i64) -> bool {
+        cx >= 0 && cy >= 0 && cx < i64::from(self.width_cells) && cy < i64::from(self.height_cells)
+    }
+
+    /// A map-frame point in continuous grid coordinates (cells, not rounded).
+    #[inline]
+    #[must_use]
+    pub fn world_to_grid(&self, x_m: f64, y_m: f64) -> (f64, f64) {
+        let dx = x_m - self.origin.x_m;
+        let dy = y_m - self.origin.y_m;
+        // Rotate by -yaw into the grid frame.
+        let gx = self.cos_yaw * dx + self.sin_yaw * dy;
+        let gy = -self.sin_yaw * dx + self.cos_yaw * dy;
+        (gx / self.resolution_m, gy / self.resolution_m)
+    }
+
+    /// A map-frame direction (unit-free) rotated into the grid frame; ray casters step along it.
+    #[inline]
+    #[must_use]
+    pub fn world_dir_to_grid(&self, dx: f64, dy: f64) -> (f64, f64) {
+        (
+            self.cos_yaw * dx + self.sin_yaw * dy,
+            -self.sin_yaw * dx + self.cos_yaw * dy,
+        )
+    }
+
+    /// The map-frame point of continuous grid coordinates (cells).
+    #[inline]
+    #[must_use]
+    pub fn grid_to_world(&self, gx: f64, gy: f64) -> (f64, f64) {
+        let (ux, uy) = (gx * self.resolution_m, gy * self.resolution_m);
+        (
+            self.origin.x_m + self.cos_yaw * ux - self.sin_yaw * uy,
+            self.origin.y_m + self.sin_yaw * ux + self.cos_yaw * uy,
+        )
+    }
+
+    /// The cell holding a map-frame point (may be off the grid: check with [`Self::contains`]).
+    #[inline]
+    #[must_use]
+    pub fn world_to_cell(&self, x_m: f64, y_m: f64) -> (i64, i64) {
+        let (gx, gy) = self.world_to_grid(x_m, y_m);
+        // Saturating float->int cast is the intent for points far off the map.
+        #[allow(clippy::cast_possible_truncation)]
+        (gx.floor() as i64, gy.floor() as i64)
+    }
+
+    /// The map-frame centre of cell (cx, cy).
+    #[inline]
+    #[must_use]
+    pub fn cell_to_world(&self, cx: i64, cy: i64) -> (f64, f64) {
+        #[allow(clippy::cast_precision_loss)]
+        self.grid_to_world(cx as f64 + 0.5, cy as f64 + 0.5)
+    }
+}
+
+/// An occupancy grid with its placement in the map frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OccupancyGrid {
+    geometry: GridGeometry,
+    cells: Vec<u8>,
+}
+
+impl OccupancyGrid {
+    /// Builds a grid, checking that the cell buffer, size and resolution agree.
+    ///
+    /// # Errors
+    /// [`MapError::Invalid`] naming the offending field and value.
+    pub fn new(
+        width_cells: u32,
+        height_cells: u32,
+        resolution_m: f64,
+        origin: Pose2D,
+        cells: Vec<u8>,
+    ) -> Result<Self, MapError> {
+        let geometry = GridGeometry::new(width_cells, height_cells, resolution_m, origin)?;
+        let expected = geometry.len();
         if cells.len() != expected {
             return Err(MapError::invalid(
                 "cells",
@@ -110,13 +265,7 @@ impl OccupancyGrid {
                 "cell values are 0..=100 or 255 (unknown)",
             ));
         }
-        Ok(Self {
-            width_cells,
-            height_cells,
-            resolution_m,
-            origin,
-            cells,
-        })
+        Ok(Self { geometry, cells })
     }
 
     /// A grid of one value everywhere; handy for tests and synthetic worlds.
@@ -140,24 +289,30 @@ impl OccupancyGrid {
         )
     }
 
+    /// Where this grid lies in the map frame.
+    #[must_use]
+    pub fn geometry(&self) -> &GridGeometry {
+        &self.geometry
+    }
+
     #[must_use]
     pub fn width_cells(&self) -> u32 {
-        self.width_cells
+        self.geometry.width_cells
     }
 
     #[must_use]
     pub fn height_cells(&self) -> u32 {
-        self.height_cells
+        self.geometry.height_cells
     }
 
     #[must_use]
     pub fn resolution_m(&self) -> f64 {
-        self.resolution_m
+        self.geometry.resolution_m
     }
 
     #[must_use]
     pub fn origin(&self) -> Pose2D {
-        self.origin
+        self.geometry.origin
     }
 
     /// Row-major cells, row 0 at the bottom.
@@ -175,48 +330,29 @@ impl OccupancyGrid {
     /// Width and height of the mapped area in metres.
     #[must_use]
     pub fn extent_m(&self) -> (f64, f64) {
-        (
-            f64::from(self.width_cells) * self.resolution_m,
-            f64::from(self.height_cells) * self.resolution_m,
-        )
+        self.geometry.extent_m()
     }
 
     /// Linear index of cell (cx, cy); callers guarantee bounds.
     #[inline]
     #[must_use]
     pub fn index(&self, cx: u32, cy: u32) -> usize {
-        cy as usize * self.width_cells as usize + cx as usize
+        self.geometry.index(cx, cy)
     }
 
     /// The value at (cx, cy), or `None` off the grid.
     #[inline]
     #[must_use]
     pub fn get(&self, cx: i64, cy: i64) -> Option<u8> {
-        if cx < 0
-            || cy < 0
-            || cx >= i64::from(self.width_cells)
-            || cy >= i64::from(self.height_cells)
-        {
-            return None;
-        }
-        // In bounds checked above, so the casts are lossless.
-        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-        Some(self.cells[self.index(cx as u32, cy as u32)])
+        self.geometry.checked_index(cx, cy).map(|i| self.cells[i])
     }
 
     /// Sets one cell; off-grid writes are ignored because callers rasterize shapes that may
     /// overhang the map edge.
     pub fn set(&mut self, cx: i64, cy: i64, value: u8) {
-        if cx < 0
-            || cy < 0
-            || cx >= i64::from(self.width_cells)
-            || cy >= i64::from(self.height_cells)
-        {
-            return;
+        if let Some(i) = self.geometry.checked_index(cx, cy) {
+            self.cells[i] = value;
         }
-        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-        let i = self.index(cx as u32, cy as u32);
-        self.cells[i] = value;
     }
 
     /// The class of cell (cx, cy); off the grid counts as unknown.
@@ -230,46 +366,28 @@ impl OccupancyGrid {
     #[inline]
     #[must_use]
     pub fn world_to_grid(&self, x_m: f64, y_m: f64) -> (f64, f64) {
-        let (s, c) = self.origin.yaw_rad.sin_cos();
-        let dx = x_m - self.origin.x_m;
-        let dy = y_m - self.origin.y_m;
-        // Rotate by -yaw into the grid frame.
-        let gx = c * dx + s * dy;
-        let gy = -s * dx + c * dy;
-        (gx / self.resolution_m, gy / self.resolution_m)
+        self.geometry.world_to_grid(x_m, y_m)
     }
 
     /// The cell holding a map-frame point (may be off the grid: check with [`Self::contains`]).
     #[inline]
     #[must_use]
     pub fn world_to_cell(&self, x_m: f64, y_m: f64) -> (i64, i64) {
-        let (gx, gy) = self.world_to_grid(x_m, y_m);
-        // Saturating float->int cast is the intent for points far off the map.
-        #[allow(clippy::cast_possible_truncation)]
-        (gx.floor() as i64, gy.floor() as i64)
+        self.geometry.world_to_cell(x_m, y_m)
     }
 
     /// Whether the cell lies on the grid.
     #[inline]
     #[must_use]
     pub fn contains(&self, cx: i64, cy: i64) -> bool {
-        cx >= 0 && cy >= 0 && cx < i64::from(self.width_cells) && cy < i64::from(self.height_cells)
+        self.geometry.contains(cx, cy)
     }
 
     /// The map-frame centre of cell (cx, cy).
     #[inline]
     #[must_use]
     pub fn cell_to_world(&self, cx: i64, cy: i64) -> (f64, f64) {
-        #[allow(clippy::cast_precision_loss)]
-        let (gx, gy) = (
-            (cx as f64 + 0.5) * self.resolution_m,
-            (cy as f64 + 0.5) * self.resolution_m,
-        );
-        let (s, c) = self.origin.yaw_rad.sin_cos();
-        (
-            self.origin.x_m + c * gx - s * gy,
-            self.origin.y_m + s * gx + c * gy,
-        )
+        self.geometry.cell_to_world(cx, cy)
     }
 
     /// Counts of free, occupied and unknown cells.

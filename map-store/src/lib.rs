@@ -29,7 +29,9 @@ pub use config::MapStoreConfig;
 pub use distance::{DistanceField, Sources};
 pub use error::MapError;
 pub use export::{export_ros_map, ExportOptions};
-pub use grid::{classify, CellClass, CellCounts, OccupancyGrid, FREE, OCCUPIED, UNKNOWN};
+pub use grid::{
+    classify, CellClass, CellCounts, GridGeometry, OccupancyGrid, FREE, OCCUPIED, UNKNOWN,
+};
 pub use import::{import_file, import_into};
 pub use picture::{import_picture, PictureOptions};
 pub use ros::{load_ros_map, ImportLimits, Interpretation, MapMode, RosMap};

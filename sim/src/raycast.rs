@@ -4,7 +4,7 @@
 //! so nothing ever leaves the building). Rays walk the grid cell by cell (Amanatides & Woo), which
 //! costs one step per crossed cell and never misses a thin wall.
 
-use map_store::{CellClass, OccupancyGrid};
+use map_store::{CellClass, GridGeometry, OccupancyGrid};
 
 /// What a ray hit on the wall grid.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -23,13 +23,7 @@ pub struct WallHit {
 /// The wall cells of a floor plan and the grid placement.
 #[derive(Debug, Clone)]
 pub struct WallGrid {
-    width: i64,
-    height: i64,
-    resolution_m: f64,
-    origin_x_m: f64,
-    origin_y_m: f64,
-    cos: f64,
-    sin: f64,
+    geometry: GridGeometry,
     wall: Vec<bool>,
     /// Distance from each cell centre to the nearest wall-cell centre (collision early-out).
     clearance_m: Vec<f32>,
@@ -43,52 +37,33 @@ impl WallGrid {
             .map(|&v| map_store::classify(v) != CellClass::Free)
             .collect();
         let df = map_store::DistanceField::compute(grid, map_store::Sources::OccupiedOrUnknown);
-        let origin = grid.origin();
-        let (sin, cos) = origin.yaw_rad.sin_cos();
         Self {
-            width: i64::from(grid.width_cells()),
-            height: i64::from(grid.height_cells()),
-            resolution_m: grid.resolution_m(),
-            origin_x_m: origin.x_m,
-            origin_y_m: origin.y_m,
-            cos,
-            sin,
+            geometry: *grid.geometry(),
             wall,
             clearance_m: df.as_slice().to_vec(),
         }
     }
 
     pub fn resolution_m(&self) -> f64 {
-        self.resolution_m
+        self.geometry.resolution_m()
     }
 
     /// Grid width and height in cells.
     pub fn size_cells(&self) -> (i64, i64) {
-        (self.width, self.height)
+        (
+            i64::from(self.geometry.width_cells()),
+            i64::from(self.geometry.height_cells()),
+        )
     }
 
     /// Map-frame centre of cell (cx, cy).
     pub fn cell_centre(&self, cx: i64, cy: i64) -> (f64, f64) {
-        #[allow(clippy::cast_precision_loss)]
-        let (gx, gy) = (
-            (cx as f64 + 0.5) * self.resolution_m,
-            (cy as f64 + 0.5) * self.resolution_m,
-        );
-        (
-            self.origin_x_m + self.cos * gx - self.sin * gy,
-            self.origin_y_m + self.sin * gx + self.cos * gy,
-        )
+        self.geometry.cell_to_world(cx, cy)
     }
 
     #[inline]
     fn index(&self, cx: i64, cy: i64) -> Option<usize> {
-        if cx < 0 || cy < 0 || cx >= self.width || cy >= self.height {
-            None
-        } else {
-            // In bounds, so non-negative and below the cell count.
-            #[allow(clippy::cast_sign_loss, clippy::cast_possible_truncation)]
-            Some((cy * self.width + cx) as usize)
-        }
+        self.geometry.checked_index(cx, cy)
     }
 
     /// Whether cell (cx, cy) is a wall; off the grid is.
@@ -100,21 +75,13 @@ impl WallGrid {
     /// Map-frame point to continuous grid coordinates (cells).
     #[inline]
     pub fn to_grid(&self, x: f64, y: f64) -> (f64, f64) {
-        let dx = x - self.origin_x_m;
-        let dy = y - self.origin_y_m;
-        (
-            (self.cos * dx + self.sin * dy) / self.resolution_m,
-            (-self.sin * dx + self.cos * dy) / self.resolution_m,
-        )
+        self.geometry.world_to_grid(x, y)
     }
 
     /// Map-frame point to its cell.
     #[inline]
     pub fn cell_of(&self, x: f64, y: f64) -> (i64, i64) {
-        let (gx, gy) = self.to_grid(x, y);
-        // Saturating casts are intended for points far off the grid.
-        #[allow(clippy::cast_possible_truncation)]
-        (gx.floor() as i64, gy.floor() as i64)
+        self.geometry.world_to_cell(x, y)
     }
 
     /// Whether a disc of radius `r` centred at (x, y) overlaps any wall cell.
@@ -124,11 +91,11 @@ impl WallGrid {
             return true;
         };
         // Cell-centre distances are within a cell diagonal of exact: only look closer when near.
-        if f64::from(self.clearance_m[i]) > r + 1.5 * self.resolution_m {
+        if f64::from(self.clearance_m[i]) > r + 1.5 * self.geometry.resolution_m() {
             return false;
         }
         let (gx, gy) = self.to_grid(x, y);
-        let rc = r / self.resolution_m;
+        let rc = r / self.geometry.resolution_m();
         #[allow(clippy::cast_possible_truncation)]
         let (x0, x1, y0, y1) = (
             (gx - rc).floor() as i64,
@@ -157,8 +124,7 @@ impl WallGrid {
     #[inline]
     pub fn cast(&self, x: f64, y: f64, dx: f64, dy: f64, max_m: f64) -> Option<WallHit> {
         let (gx, gy) = self.to_grid(x, y);
-        let ux = self.cos * dx + self.sin * dy;
-        let uy = -self.sin * dx + self.cos * dy;
+        let (ux, uy) = self.geometry.world_dir_to_grid(dx, dy);
         #[allow(clippy::cast_possible_truncation)]
         let (mut cx, mut cy) = (gx.floor() as i64, gy.floor() as i64);
         if self.is_wall(cx, cy) {
@@ -198,7 +164,7 @@ impl WallGrid {
         } else {
             (gy - cy as f64) * delta_y
         };
-        let max_cells = max_m / self.resolution_m;
+        let max_cells = max_m / self.geometry.resolution_m();
         loop {
             let (t, side) = if next_x < next_y {
                 cx += step_x;
@@ -216,11 +182,11 @@ impl WallGrid {
             }
             if self.is_wall(cx, cy) {
                 let along_cells = if side == 0 { gy + t * uy } else { gx + t * ux };
-                let dist_m = t * self.resolution_m;
+                let dist_m = t * self.geometry.resolution_m();
                 return Some(WallHit {
                     dist_m,
                     side,
-                    along_m: along_cells * self.resolution_m,
+                    along_m: along_cells * self.geometry.resolution_m(),
                     x_m: x + dist_m * dx,
                     y_m: y + dist_m * dy,
                 });

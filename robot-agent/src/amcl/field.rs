@@ -6,7 +6,7 @@
 //! the sensor model looks a beam's likelihood up in a 256-entry table instead of evaluating a
 //! Gaussian per beam. The field is computed once per map version and shared by `Arc`.
 
-use map_store::{classify, CellClass, DistanceField, OccupancyGrid, Sources};
+use map_store::{classify, CellClass, DistanceField, GridGeometry, OccupancyGrid, Sources};
 use protocol::Pose2D;
 
 use super::AmclError;
@@ -18,10 +18,7 @@ pub const FIELD_LEVELS: u8 = u8::MAX;
 /// random particles are drawn.
 #[derive(Debug, Clone)]
 pub struct LikelihoodField {
-    width_cells: u32,
-    height_cells: u32,
-    resolution_m: f64,
-    origin: Pose2D,
+    geometry: GridGeometry,
     max_dist_m: f64,
     quantized: Vec<u8>,
     free_cells: Vec<u32>,
@@ -64,35 +61,38 @@ impl LikelihoodField {
             .map(|(i, _)| i as u32)
             .collect();
         Ok(Self {
-            width_cells: grid.width_cells(),
-            height_cells: grid.height_cells(),
-            resolution_m: grid.resolution_m(),
-            origin: grid.origin(),
+            geometry: *grid.geometry(),
             max_dist_m,
             quantized,
             free_cells,
         })
     }
 
+    /// Where the field lies in the map frame (the map's own geometry).
+    #[must_use]
+    pub fn geometry(&self) -> &GridGeometry {
+        &self.geometry
+    }
+
     #[must_use]
     pub fn width_cells(&self) -> u32 {
-        self.width_cells
+        self.geometry.width_cells()
     }
 
     #[must_use]
     pub fn height_cells(&self) -> u32 {
-        self.height_cells
+        self.geometry.height_cells()
     }
 
     #[must_use]
     pub fn resolution_m(&self) -> f64 {
-        self.resolution_m
+        self.geometry.resolution_m()
     }
 
     /// Pose of the lower-left corner of cell (0, 0) in the map frame.
     #[must_use]
     pub fn origin(&self) -> Pose2D {
-        self.origin
+        self.geometry.origin()
     }
 
     #[must_use]
@@ -125,10 +125,11 @@ impl LikelihoodField {
         }
         #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
         let (ix, iy) = (gx as usize, gy as usize);
-        if ix >= self.width_cells as usize || iy >= self.height_cells as usize {
+        if ix >= self.geometry.width_cells() as usize || iy >= self.geometry.height_cells() as usize
+        {
             return FIELD_LEVELS;
         }
-        self.quantized[iy * self.width_cells as usize + ix]
+        self.quantized[iy * self.geometry.width_cells() as usize + ix]
     }
 
     /// Clamped distance to the nearest obstacle at a map-frame point, to the quantization step.
@@ -142,30 +143,20 @@ impl LikelihoodField {
     #[inline]
     #[must_use]
     pub fn world_to_grid(&self, x_m: f64, y_m: f64) -> (f64, f64) {
-        let (s, c) = self.origin.yaw_rad.sin_cos();
-        let dx = x_m - self.origin.x_m;
-        let dy = y_m - self.origin.y_m;
-        (
-            (c * dx + s * dy) / self.resolution_m,
-            (-s * dx + c * dy) / self.resolution_m,
-        )
+        self.geometry.world_to_grid(x_m, y_m)
     }
 
     /// Map-frame position of continuous grid coordinates (cells).
     #[must_use]
     pub fn grid_to_world(&self, gx: f64, gy: f64) -> (f64, f64) {
-        let (s, c) = self.origin.yaw_rad.sin_cos();
-        let (ux, uy) = (gx * self.resolution_m, gy * self.resolution_m);
-        (
-            self.origin.x_m + c * ux - s * uy,
-            self.origin.y_m + s * ux + c * uy,
-        )
+        self.geometry.grid_to_world(gx, gy)
     }
 
     /// Grid coordinates (column, row) of the `k`-th free cell.
     pub(crate) fn free_cell(&self, k: usize) -> Option<(u32, u32)> {
         let i = *self.free_cells.get(k)?;
-        Some((i % self.width_cells, i / self.width_cells))
+        let w = self.geometry.width_cells();
+        Some((i % w, i / w))
     }
 }
 
