@@ -125,7 +125,8 @@ macro_rules! define_id {
 
         impl fmt::Display for $name {
             fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-                f.write_str(&self.0)
+                // `pad` honours width and alignment, so ids line up in tables.
+                f.pad(&self.0)
             }
         }
 
@@ -243,6 +244,13 @@ impl MapId {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn display_honours_width_for_tables() {
+        let name = MapName::new("depot").unwrap();
+        assert_eq!(format!("[{name:<8}]"), "[depot   ]");
+        assert_eq!(format!("[{name:>8}]"), "[   depot]");
+    }
 
     #[test]
     fn default_site_is_a_valid_id() {
