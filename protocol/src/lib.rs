@@ -65,12 +65,14 @@
 pub mod codec;
 pub mod ids;
 pub mod keys;
+pub mod lpe;
 pub mod messages;
 pub mod zenoh_io;
 
 pub use codec::{decode, encode, DecodeError, EncodeError, WireMessage, WIRE_VERSION};
 pub use ids::{IdError, IdRejection, MapId, MapName, RobotId, SiteId, TaskId};
 pub use keys::RobotTopic;
+pub use lpe::{LpeParams, LpeParamsError};
 pub use messages::{
     normalize_angle, AgentState, AgentStatus, CameraFrame, CmdVel, Dlm, Header, Image,
     ImageEncoding, Intention, LaserScan, MapGrid, MapMeta, MapRef, Odometry, Pose2D, PoseEstimate,

@@ -13,101 +13,16 @@ use std::path::Path as FsPath;
 use image::{ImageFormat, RgbImage};
 use map_store::{CellClass, OccupancyGrid};
 use protocol::Pose2D;
-use serde::{Deserialize, Serialize};
 
-/// Rendering parameters of the LPE image (the `[lpe]` table of the config file).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct LpeParams {
-    /// Width and height of the square image.
-    pub size_px: u32,
-    /// Map metres per image pixel (the window is `size_px * metres_per_px` wide).
-    pub metres_per_px: f64,
-    /// Robot pixel `[column, row]`, row 0 at the top.
-    pub robot_px: [u32; 2],
-    /// Line width of the travelled path.
-    pub travelled_width_px: f64,
-    /// Line width of the path ahead.
-    pub ahead_width_px: f64,
-    pub free_rgb: [u8; 3],
-    pub occupied_rgb: [u8; 3],
-    pub unknown_rgb: [u8; 3],
-    pub travelled_rgb: [u8; 3],
-    pub ahead_rgb: [u8; 3],
-}
-
-impl Default for LpeParams {
-    fn default() -> Self {
-        Self {
-            size_px: 224,
-            metres_per_px: 0.05,
-            // Below the centre: the path ahead matters more than the path behind.
-            robot_px: [112, 168],
-            travelled_width_px: 3.0,
-            ahead_width_px: 3.0,
-            free_rgb: [255, 255, 255],
-            occupied_rgb: [0, 0, 0],
-            unknown_rgb: [128, 128, 128],
-            travelled_rgb: [255, 0, 0],
-            ahead_rgb: [0, 0, 255],
-        }
-    }
-}
+pub use protocol::LpeParams;
 
 /// A bad LPE parameter or an image that could not be written.
 #[derive(Debug, thiserror::Error)]
 pub enum LpeError {
-    #[error("invalid lpe.{field} = {value}: {reason}")]
-    Invalid {
-        field: &'static str,
-        value: String,
-        reason: &'static str,
-    },
+    #[error(transparent)]
+    Invalid(#[from] protocol::LpeParamsError),
     #[error("cannot encode or write LPE image {path}: {reason}")]
     Write { path: String, reason: String },
-}
-
-impl LpeParams {
-    /// Checks the fields, naming the first bad one.
-    ///
-    /// # Errors
-    /// [`LpeError::Invalid`].
-    pub fn validate(&self) -> Result<(), LpeError> {
-        if !(8..=4096).contains(&self.size_px) {
-            return Err(LpeError::Invalid {
-                field: "size_px",
-                value: self.size_px.to_string(),
-                reason: "must be in 8..=4096",
-            });
-        }
-        if !self.metres_per_px.is_finite() || self.metres_per_px <= 0.0 {
-            return Err(LpeError::Invalid {
-                field: "metres_per_px",
-                value: self.metres_per_px.to_string(),
-                reason: "must be positive and finite",
-            });
-        }
-        if self.robot_px[0] >= self.size_px || self.robot_px[1] >= self.size_px {
-            return Err(LpeError::Invalid {
-                field: "robot_px",
-                value: format!("{:?}", self.robot_px),
-                reason: "must lie inside the image",
-            });
-        }
-        for (field, w) in [
-            ("travelled_width_px", self.travelled_width_px),
-            ("ahead_width_px", self.ahead_width_px),
-        ] {
-            if !w.is_finite() || !(0.0..=64.0).contains(&w) {
-                return Err(LpeError::Invalid {
-                    field,
-                    value: w.to_string(),
-                    reason: "must be in 0..=64",
-                });
-            }
-        }
-        Ok(())
-    }
 }
 
 /// A rendered LPE image (RGB, row-major from the top-left).

@@ -21,8 +21,6 @@
 use std::collections::BTreeMap;
 use std::fmt;
 
-use serde::{Deserialize, Serialize};
-
 use crate::config::{ControllerKind, Limits};
 
 /// The card format this agent reads.
@@ -89,22 +87,9 @@ impl fmt::Display for ModelKind {
 }
 
 /// How the planner rendered the LPE images a model was trained on (the planner's `[lpe]`
-/// parameters, DESIGN §4): a model is only valid for that rendering.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct LpeRendering {
-    pub size_px: u32,
-    pub metres_per_px: f64,
-    /// Robot pixel `[column, row]`, row 0 at the top.
-    pub robot_px: [u32; 2],
-    pub travelled_width_px: f64,
-    pub ahead_width_px: f64,
-    pub free_rgb: [u8; 3],
-    pub occupied_rgb: [u8; 3],
-    pub unknown_rgb: [u8; 3],
-    pub travelled_rgb: [u8; 3],
-    pub ahead_rgb: [u8; 3],
-}
+/// parameters, DESIGN §4): a model is only valid for that rendering. The one definition lives in
+/// `protocol`, shared with the planner that draws the images.
+pub type LpeRendering = protocol::LpeParams;
 
 /// Per-channel (R, G, B) normalization: `x = (pixel / 255 - mean) / std`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -311,20 +296,23 @@ impl ModelCard {
             (ModelKind::Lpe, Some(raw)) => {
                 let r: LpeRendering = serde_json::from_str(raw)
                     .map_err(|e| invalid("lpe_rendering", raw, format!("bad JSON: {e}")))?;
-                if r.size_px == 0 || r.robot_px[0] >= r.size_px || r.robot_px[1] >= r.size_px {
-                    return Err(invalid(
-                        "lpe_rendering",
-                        raw,
-                        "size_px must be positive and robot_px inside the image",
-                    ));
+                // The shared struct fills absent keys with defaults (handy in a config file);
+                // a card must state every one, or a model would silently claim a rendering.
+                let present: serde_json::Map<String, serde_json::Value> = serde_json::from_str(raw)
+                    .map_err(|e| invalid("lpe_rendering", raw, format!("bad JSON: {e}")))?;
+                if let Ok(serde_json::Value::Object(all)) =
+                    serde_json::to_value(LpeRendering::default())
+                {
+                    if let Some(missing) = all.keys().find(|k| !present.contains_key(*k)) {
+                        return Err(invalid(
+                            "lpe_rendering",
+                            raw,
+                            format!("missing key {missing}"),
+                        ));
+                    }
                 }
-                if !r.metres_per_px.is_finite() || r.metres_per_px <= 0.0 {
-                    return Err(invalid(
-                        "lpe_rendering",
-                        raw,
-                        "metres_per_px must be positive and finite",
-                    ));
-                }
+                r.validate()
+                    .map_err(|e| invalid("lpe_rendering", raw, e.to_string()))?;
                 Some(r)
             }
             (ModelKind::Lpe, None) => {
