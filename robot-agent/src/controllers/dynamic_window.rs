@@ -22,6 +22,18 @@
 
 use protocol::normalize_angle;
 
+/// The 8-connected neighbourhood of a grid cell, as (dx, dy) offsets.
+const NEIGHBOURS_8: [(isize, isize); 8] = [
+    (1, 0),
+    (-1, 0),
+    (0, 1),
+    (0, -1),
+    (1, 1),
+    (1, -1),
+    (-1, 1),
+    (-1, -1),
+];
+
 use super::path_tracker::{check_non_negative, check_positive};
 use super::path_tracker::{checked_task, goal_speed_cap, to_robot_frame, window};
 use super::{Control, ControlInput, Controller, ControllerError};
@@ -374,16 +386,7 @@ impl NavGrid {
                 continue;
             }
             let (cx, cy) = ((i % self.n) as isize, (i / self.n) as isize);
-            for (dx, dy) in [
-                (1, 0),
-                (-1, 0),
-                (0, 1),
-                (0, -1),
-                (1, 1),
-                (1, -1),
-                (-1, 1),
-                (-1, -1),
-            ] {
+            for (dx, dy) in NEIGHBOURS_8 {
                 let (nx, ny) = (cx + dx, cy + dy);
                 if nx < 0 || ny < 0 || nx >= n || ny >= n {
                     continue;
@@ -459,16 +462,7 @@ impl NavGrid {
         while travelled < distance_m {
             let (cx, cy) = ((i % self.n) as isize, (i / self.n) as isize);
             let mut next = i;
-            for (dx, dy) in [
-                (1, 0),
-                (-1, 0),
-                (0, 1),
-                (0, -1),
-                (1, 1),
-                (1, -1),
-                (-1, 1),
-                (-1, -1),
-            ] {
+            for (dx, dy) in NEIGHBOURS_8 {
                 let (nx, ny) = (cx + dx, cy + dy);
                 if nx < 0 || ny < 0 || nx >= n || ny >= n {
                     continue;
