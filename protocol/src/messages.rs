@@ -531,6 +531,13 @@ pub enum TaskState {
         robot_id: RobotId,
         goal_index: u32,
     },
+    /// Held at goal `goal_index` because its robot went silent or lost localization; resumes
+    /// (back to `Active`) when the robot reports again, fails after the service's grace period.
+    Paused {
+        robot_id: RobotId,
+        goal_index: u32,
+        reason: String,
+    },
     Completed,
     Failed {
         reason: String,
@@ -550,7 +557,9 @@ impl TaskState {
     /// The robot working on the task, if any.
     pub fn robot_id(&self) -> Option<&RobotId> {
         match self {
-            TaskState::Assigned { robot_id } | TaskState::Active { robot_id, .. } => Some(robot_id),
+            TaskState::Assigned { robot_id }
+            | TaskState::Active { robot_id, .. }
+            | TaskState::Paused { robot_id, .. } => Some(robot_id),
             _ => None,
         }
     }

@@ -263,8 +263,13 @@ fn every_status_and_task_state_round_trips() {
             robot_id: robot_id.clone(),
         },
         TaskState::Active {
-            robot_id,
+            robot_id: robot_id.clone(),
             goal_index: 0,
+        },
+        TaskState::Paused {
+            robot_id,
+            goal_index: 1,
+            reason: "robot went offline".into(),
         },
         TaskState::Completed,
         TaskState::Failed {
