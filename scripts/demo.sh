@@ -1,33 +1,11 @@
 #!/usr/bin/env bash
-# The README's run command. Until the fleet demo (planner service + simulator + agents over
-# Zenoh) lands, it walks through the pieces that exist, leaving pictures to look at:
-# floor plans into the versioned store and back out, a hybrid A* plan with its LPE intention,
-# and the simulator's world and camera. Output goes to ./out/demo (or $1).
+# The README's run command: the fleet demo. Builds the release binaries, then runs
+# `planner-service demo`: the planner service (HTTP API + dashboard, embedded store with the
+# shipped floor plans preloaded), the simulator with N robots (default 3) and one robot agent
+# per robot, as separate processes over Zenoh on loopback. It prints the dashboard URL and the
+# token and runs until Ctrl-C. Arguments go to `planner-service demo` (e.g. --robots 5,
+# --listen 0.0.0.0:8080, --controllers dynamic-window,path-tracker).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-out=${1:-out/demo}
-maps=${FLEET_SHARED_DIR:-../shared}/maps/nav2
-mkdir -p "$out"
-
-cargo build --release --locked -p map-store -p planner-service -p sim
-bin=target/release
-
-echo "== 1. import the Nav2 floor plans into a fresh store ($out/store)"
-rm -rf "$out/store"
-for yaml in "$maps"/*.yaml; do
-  "$bin/map-store" --data-dir "$out/store" import "$yaml"
-done
-"$bin/map-store" --data-dir "$out/store" list
-"$bin/map-store" --data-dir "$out/store" export depot "$out/depot_export.yaml"
-
-echo "== 2. plan across the depot with hybrid A* (path picture + LPE intention image)"
-"$bin/planner-service" plan --map "$maps/depot.yaml" --start 2,2,0 --goal 25,12,1.57 \
-  --picture "$out/depot_path.png" --lpe "$out/depot_lpe.png" | head -6
-
-echo "== 3. the simulator: task E (a maze) from above, and what the camera sees in task B"
-"$bin/sim" view --scenario sim/scenarios/task_e.yaml --out "$out/task_e_world.png"
-"$bin/sim" render --scenario sim/scenarios/task_b.yaml --pose 2.5,10,0 \
-  --out "$out/task_b_camera.png" --scan-out "$out/task_b_scan.json"
-
-echo
-echo "pictures in $out: depot_path.png depot_lpe.png task_e_world.png task_b_camera.png"
+cargo build --release --locked -p planner-service -p sim -p robot-agent
+exec target/release/planner-service demo "$@"

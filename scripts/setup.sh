@@ -26,3 +26,16 @@ if ! compgen -G ".venv/lib/python3*/site-packages/onnxruntime/capi/libonnxruntim
   echo "error: onnxruntime ${ORT_VERSION} installed, but no libonnxruntime.so* under .venv/lib/python3*/site-packages/onnxruntime/capi/" >&2
   exit 1
 fi
+
+# Headless Chromium for the dashboard's browser tests (Debian packages; Playwright never
+# downloads a browser here) and the tests' npm packages (playwright-core, pinned in
+# web/package-lock.json).
+if ! command -v chromium >/dev/null 2>&1; then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium chromium-driver >/dev/null
+  else
+    echo "warning: chromium missing; install the Debian packages chromium and chromium-driver for the browser tests" >&2
+  fi
+fi
+(cd web && npm ci --no-audit --no-fund --prefer-offline >/dev/null)
+

@@ -1,6 +1,9 @@
 //! Evaluation: closed-loop runs of simulator, agent and planner (the paper's Table 1).
 //!
-//! Today it holds the metrics of Table 1 ([`metrics`]); the lock-step harness, the
-//! demonstration recorder and the trajectory plots come with the robot-agent work.
+//! - [`metrics`]: the metrics of Table 1.
+//! - [`amcl_accuracy`]: AMCL against the simulator's ground truth on tasks A–E, in lock-step.
+//! - [`cli`]: the `eval` command line.
 
+pub mod amcl_accuracy;
+pub mod cli;
 pub mod metrics;

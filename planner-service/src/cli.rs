@@ -1,9 +1,12 @@
-//! The `planner-service` command line: `plan` one path, `bench` the planner.
+//! The `planner-service` command line: `plan` one path, `bench` the planner, `serve` the fleet
+//! API.
 //!
-//! `serve` and `demo` are added by the fleet service. [`run`] does the work so tests can call
-//! it; `main` only parses arguments and reports errors.
+//! [`run`] does the work so tests can call it; `main` only parses arguments and reports
+//! errors. `serve` settings come from the config file, then the environment (`FLEET_TOKEN`,
+//! `FLEET_DATA_DIR`, `FLEET_LISTEN`), then the flags: CLI > env > file > defaults.
 
 use std::io::Write;
+use std::net::SocketAddr;
 use std::path::{Path as FsPath, PathBuf};
 use std::sync::Arc;
 
@@ -11,10 +14,12 @@ use anyhow::Context;
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use map_store::{load_ros_map, ImportLimits};
-use protocol::Pose2D;
+use protocol::{Pose2D, SiteId};
 
 use crate::bench::{markdown_table, run_bench, BenchOptions};
 use crate::config::ServiceConfig;
+use crate::http::auth::TokenSource;
+use crate::http::{ServeOptions, Server};
 use crate::intention::{dlm_from_path, render_lpe};
 use crate::picture::{render_picture, save_picture};
 use crate::planning::{Planner, PlanningMap};
@@ -33,6 +38,124 @@ pub enum Command {
     Plan(PlanArgs),
     /// Benchmark hybrid A* against 2-D A* on random start/goal pairs.
     Bench(BenchArgs),
+    /// Run the fleet service: HTTP API + dashboard, map server and fleet over Zenoh.
+    Serve(ServeArgs),
+    /// The whole fleet on this machine: the service, the simulator and one agent per robot as
+    /// separate processes over Zenoh, until Ctrl-C.
+    Demo(DemoArgs),
+    /// Benchmark the replanning loop: N simulated robots sending poses at a rate over Zenoh.
+    BenchFleet(BenchFleetArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct DemoArgs {
+    /// Simulated robots.
+    #[arg(long, default_value_t = 3)]
+    pub robots: usize,
+    /// HTTP address of the API and dashboard.
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    pub listen: SocketAddr,
+    /// Data directory (maps, tasks, token); kept between runs.
+    #[arg(long, default_value = "out/demo-data")]
+    pub data_dir: PathBuf,
+    /// Bearer token of mutating routes (default: generated once, kept in the data directory).
+    #[arg(long, env = "FLEET_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
+    /// Configuration file (TOML; see planner.example.toml).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Scenario the simulator runs (default: task A's junctions world).
+    #[arg(long)]
+    pub scenario: Option<PathBuf>,
+    /// Controller per robot, cycled: dynamic-window, path-tracker, dlm, lpe, none.
+    #[arg(long, value_delimiter = ',', default_value = "dynamic-window")]
+    pub controllers: Vec<String>,
+}
+
+#[derive(Debug, Args)]
+pub struct BenchFleetArgs {
+    /// Simulated robots.
+    #[arg(long, default_value_t = 100)]
+    pub robots: usize,
+    /// Poses per second per robot.
+    #[arg(long, default_value_t = 10.0)]
+    pub rate_hz: f64,
+    /// Length of the measured run.
+    #[arg(long, default_value_t = 20.0)]
+    pub duration_s: f64,
+    /// Map (ROS YAML); default: Nav2's 100 m x 100 m map with 15 % obstacles.
+    #[arg(long)]
+    pub map: Option<PathBuf>,
+    /// Speed of the simulated robots along their paths.
+    #[arg(long, default_value_t = 0.5)]
+    pub speed_mps: f64,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Configuration file (TOML).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Write the results as JSON here.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+#[derive(Debug, Args)]
+pub struct ServeArgs {
+    /// HTTP address, e.g. 127.0.0.1:8080 (port 0: any free port). Default: `[http] listen`.
+    #[arg(long, env = "FLEET_LISTEN")]
+    pub listen: Option<SocketAddr>,
+    /// Data directory: maps, tasks, the generated token.
+    #[arg(long, env = "FLEET_DATA_DIR")]
+    pub data_dir: PathBuf,
+    /// Bearer token of mutating routes. Default: `[http] token`, else generated once and kept
+    /// in <data-dir>/token.
+    #[arg(long, env = "FLEET_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
+    /// Configuration file (TOML; see planner.example.toml).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Site: Zenoh keys are under fleet/<site>/. Default: `[zenoh] site`.
+    #[arg(long)]
+    pub site: Option<SiteId>,
+    /// Zenoh endpoint to listen on (repeatable), e.g. tcp/0.0.0.0:7447. Replaces `[zenoh] listen`.
+    #[arg(long = "zenoh-listen")]
+    pub zenoh_listen: Vec<String>,
+    /// Zenoh endpoint to connect to (repeatable). Replaces `[zenoh] connect`.
+    #[arg(long = "zenoh-connect")]
+    pub zenoh_connect: Vec<String>,
+}
+
+impl ServeArgs {
+    /// The configuration file (or defaults) with the environment and flags applied on top.
+    ///
+    /// # Errors
+    /// The file cannot be read or parsed, or a flag's value is invalid (named).
+    pub fn resolve(&self) -> anyhow::Result<ServeOptions> {
+        let mut config = load_config(self.config.as_deref())?;
+        // clap already chose flag over environment for these.
+        if let Some(listen) = self.listen {
+            config.http.listen = listen;
+        }
+        if let Some(token) = &self.token {
+            config.http.token = Some(token.clone());
+        }
+        if let Some(site) = &self.site {
+            config.zenoh.site = site.clone();
+        }
+        if !self.zenoh_listen.is_empty() {
+            config.zenoh.listen.clone_from(&self.zenoh_listen);
+        }
+        if !self.zenoh_connect.is_empty() {
+            config.zenoh.connect.clone_from(&self.zenoh_connect);
+        }
+        config
+            .validate()
+            .map_err(|reason| anyhow::anyhow!("invalid settings: {reason}"))?;
+        Ok(ServeOptions {
+            config,
+            data_dir: self.data_dir.clone(),
+        })
+    }
 }
 
 #[derive(Debug, Args)]
@@ -117,7 +240,119 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<()> {
     match cli.command {
         Command::Plan(args) => plan(&args, out),
         Command::Bench(args) => bench(&args, out),
+        Command::Serve(args) => serve(&args, out),
+        Command::Demo(args) => demo(args, out),
+        Command::BenchFleet(args) => bench_fleet(&args, out),
     }
+}
+
+fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("cannot start the tokio runtime")
+}
+
+fn demo(args: DemoArgs, out: &mut dyn Write) -> anyhow::Result<()> {
+    let serve = ServeArgs {
+        listen: Some(args.listen),
+        data_dir: args.data_dir,
+        token: args.token,
+        config: args.config,
+        site: None,
+        zenoh_listen: Vec::new(),
+        zenoh_connect: Vec::new(),
+    }
+    .resolve()?;
+    let opts = crate::demo::DemoOptions {
+        serve,
+        robots: args.robots,
+        scenario: args
+            .scenario
+            .unwrap_or_else(|| crate::demo::scenarios_dir().join("task_a.yaml")),
+        controllers: args.controllers,
+        bin_dir: None,
+    };
+    runtime()?.block_on(crate::demo::run(opts, out))
+}
+
+fn bench_fleet(args: &BenchFleetArgs, out: &mut dyn Write) -> anyhow::Result<()> {
+    let opts = crate::fleet_bench::FleetBenchOptions {
+        map_yaml: args
+            .map
+            .clone()
+            .unwrap_or_else(|| map_store::paths::nav2_maps_dir().join("100by100_15.yaml")),
+        robots: args.robots,
+        rate_hz: args.rate_hz,
+        duration_s: args.duration_s,
+        speed_mps: args.speed_mps,
+        seed: args.seed,
+        config: load_config(args.config.as_deref())?,
+    };
+    let bar = ProgressBar::new(0).with_style(
+        ProgressStyle::with_template("{msg} [{bar:40}] {elapsed}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar.set_message(format!("{} robots at {} Hz", opts.robots, opts.rate_hz));
+    let report = runtime()?.block_on(crate::fleet_bench::run_fleet_bench(&opts, &bar))?;
+    bar.finish_and_clear();
+    write!(out, "{}", crate::fleet_bench::markdown(&report))?;
+    if let Some(path) = &args.out {
+        std::fs::write(path, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    Ok(())
+}
+
+fn serve(args: &ServeArgs, out: &mut dyn Write) -> anyhow::Result<()> {
+    let opts = args.resolve()?;
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("cannot start the tokio runtime")?;
+    runtime.block_on(async {
+        let server = Server::start(opts).await?;
+        writeln!(out, "listening on {}", server.url())?;
+        match server.token_source() {
+            TokenSource::Configured => writeln!(out, "token: {}", server.token())?,
+            TokenSource::Stored(p) => {
+                writeln!(out, "token: {} (from {})", server.token(), p.display())?
+            }
+            TokenSource::Generated(p) => {
+                writeln!(
+                    out,
+                    "token: {} (generated, stored in {})",
+                    server.token(),
+                    p.display()
+                )?;
+            }
+        }
+        writeln!(out, "zenoh: {}", server.zenoh_locators().await.join(" "))?;
+        out.flush()?;
+        wait_for_stop_signal().await?;
+        writeln!(out, "stopping")?;
+        out.flush()?;
+        server.stop().await?;
+        Ok(())
+    })
+}
+
+/// Ctrl-C, or SIGTERM on Unix (what `kill` and process supervisors send).
+pub(crate) async fn wait_for_stop_signal() -> anyhow::Result<()> {
+    #[cfg(unix)]
+    {
+        let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+            .context("cannot listen for SIGTERM")?;
+        tokio::select! {
+            r = tokio::signal::ctrl_c() => r.context("cannot listen for Ctrl-C")?,
+            _ = term.recv() => {}
+        }
+    }
+    #[cfg(not(unix))]
+    tokio::signal::ctrl_c()
+        .await
+        .context("cannot listen for Ctrl-C")?;
+    Ok(())
 }
 
 fn plan(args: &PlanArgs, out: &mut dyn Write) -> anyhow::Result<()> {

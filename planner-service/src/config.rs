@@ -1,12 +1,18 @@
-//! The planner service's configuration file: `[planner]`, `[dlm]`, `[lpe]` tables.
+//! The planner service's configuration file: `[planner]`, `[dlm]`, `[lpe]`, `[http]`, `[zenoh]`,
+//! `[fleet]` tables.
 //!
 //! Every table has defaults, so a file names only what it changes; unknown keys are errors.
-//! `planner.example.toml` in the crate documents every key (a test parses it).
+//! `planner.example.toml` in the crate documents every key (a test parses it). `serve` applies
+//! the environment (`FLEET_*`) and its flags on top of the file (CLI > env > file > defaults).
 
+use std::net::SocketAddr;
 use std::path::Path;
 
+use map_store::ImportLimits;
+use protocol::SiteId;
 use serde::{Deserialize, Serialize};
 
+use crate::fleet::FleetConfig;
 use crate::intention::{DlmParams, LpeParams};
 use crate::planning::PlannerConfig;
 
@@ -17,6 +23,151 @@ pub struct ServiceConfig {
     pub planner: PlannerConfig,
     pub dlm: DlmParams,
     pub lpe: LpeParams,
+    pub http: HttpConfig,
+    pub zenoh: ZenohConfig,
+    /// The fleet core (`[fleet]`): goal tolerance, timeouts of silent robots and paused tasks.
+    pub fleet: FleetConfig,
+}
+
+/// The HTTP API (`[http]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct HttpConfig {
+    /// Address the API listens on; port 0 picks a free port.
+    pub listen: SocketAddr,
+    /// Largest request body of a floor-plan upload or preview (multipart), in bytes.
+    pub max_upload_bytes: u64,
+    /// Largest body of any other request (JSON), in bytes.
+    pub max_json_bytes: u64,
+    /// The bearer token of mutating routes; `None` generates one in `<data-dir>/token`.
+    pub token: Option<String>,
+    /// Whether read routes need the token too (header or `access_token=` query parameter).
+    pub protect_reads: bool,
+    /// Origins allowed to call the API from a browser page served elsewhere (`"*"`: any).
+    pub cors: Vec<String>,
+    /// Image limits of uploaded floor plans, checked before decoding.
+    pub import_limits: ImportLimits,
+}
+
+impl Default for HttpConfig {
+    fn default() -> Self {
+        Self {
+            listen: SocketAddr::from(([127, 0, 0, 1], 8080)),
+            max_upload_bytes: 64 << 20,
+            max_json_bytes: 1 << 20,
+            token: None,
+            protect_reads: false,
+            cors: Vec::new(),
+            import_limits: ImportLimits::default(),
+        }
+    }
+}
+
+/// Shortest token accepted: anything shorter is guessable.
+pub const MIN_TOKEN_LEN: usize = 16;
+
+impl HttpConfig {
+    /// Checks limits, token and CORS origins.
+    ///
+    /// # Errors
+    /// A message naming the field and value.
+    pub fn validate(&self) -> Result<(), String> {
+        for (field, v) in [
+            ("http.max_upload_bytes", self.max_upload_bytes),
+            ("http.max_json_bytes", self.max_json_bytes),
+        ] {
+            if v == 0 || usize::try_from(v).is_err() {
+                return Err(format!(
+                    "invalid {field} = {v}: must be positive and fit in memory"
+                ));
+            }
+        }
+        if let Some(token) = &self.token {
+            validate_token(token).map_err(|reason| format!("invalid http.token: {reason}"))?;
+        }
+        for origin in &self.cors {
+            let host = origin
+                .strip_prefix("http://")
+                .or_else(|| origin.strip_prefix("https://"));
+            let ok = origin == "*"
+                || host.is_some_and(|h| {
+                    !h.is_empty() && h.chars().all(|c| c.is_ascii_graphic() && c != '/')
+                });
+            if !ok {
+                return Err(format!(
+                    "invalid http.cors entry {origin:?}: expected \"*\" or an origin like \"http://host:port\""
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Checks a bearer token: at least [`MIN_TOKEN_LEN`] visible ASCII characters, at most 256.
+///
+/// # Errors
+/// A reason that does not repeat the token (it is a secret).
+pub fn validate_token(token: &str) -> Result<(), String> {
+    if token.len() < MIN_TOKEN_LEN || token.len() > 256 {
+        return Err(format!(
+            "length {} is outside {MIN_TOKEN_LEN}..=256 characters",
+            token.len()
+        ));
+    }
+    if !token.chars().all(|c| c.is_ascii_graphic()) {
+        return Err("only visible ASCII characters are allowed (no spaces)".into());
+    }
+    Ok(())
+}
+
+/// The Zenoh session of the service (`[zenoh]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ZenohConfig {
+    /// The site: every key is under `fleet/<site>/`.
+    pub site: SiteId,
+    /// Endpoints to listen on, e.g. `tcp/0.0.0.0:7447`; empty: Zenoh's default.
+    pub listen: Vec<String>,
+    /// Endpoints to connect to (a router, or the robots' peers).
+    pub connect: Vec<String>,
+    /// Multicast scouting (finds peers on the LAN by itself; off so a stranger's session on
+    /// the same network is never picked up).
+    pub multicast: bool,
+}
+
+impl Default for ZenohConfig {
+    fn default() -> Self {
+        Self {
+            site: default_site(),
+            listen: Vec::new(),
+            connect: Vec::new(),
+            multicast: false,
+        }
+    }
+}
+
+fn default_site() -> SiteId {
+    match SiteId::new(map_store::config::DEFAULT_SITE) {
+        Ok(site) => site,
+        // The literal is a valid id; the example-file test checks it.
+        Err(e) => unreachable!("default site is invalid: {e}"),
+    }
+}
+
+impl ZenohConfig {
+    /// The Zenoh configuration of the service's peer session.
+    ///
+    /// # Errors
+    /// A message naming the endpoint list Zenoh refused.
+    pub fn session_config(&self) -> Result<zenoh::Config, String> {
+        let mut c = protocol::zenoh_io::peer_config(&self.listen, &self.connect)
+            .map_err(|e| e.to_string())?;
+        if self.multicast {
+            c.insert_json5("scouting/multicast/enabled", "true")
+                .map_err(|e| format!("invalid zenoh.multicast = true: {e}"))?;
+        }
+        Ok(c)
+    }
 }
 
 /// A configuration file that cannot be read, parsed or validated.
@@ -71,6 +222,9 @@ impl ServiceConfig {
         self.planner.validate().map_err(|e| e.to_string())?;
         self.dlm.validate()?;
         self.lpe.validate().map_err(|e| e.to_string())?;
+        self.http.validate()?;
+        self.zenoh.session_config()?;
+        self.fleet.validate()?;
         Ok(())
     }
 }
@@ -94,5 +248,25 @@ mod tests {
         assert!(err.to_string().contains("window"), "{err}");
         let err = ServiceConfig::from_toml_str("[lpe]\nmetres_per_px = 0.0\n", "t").unwrap_err();
         assert!(err.to_string().contains("metres_per_px"), "{err}");
+        let err = ServiceConfig::from_toml_str("[http]\nmax_upload_bytes = 0\n", "t").unwrap_err();
+        assert!(err.to_string().contains("max_upload_bytes"), "{err}");
+        let err = ServiceConfig::from_toml_str("[http]\ntoken = \"short\"\n", "t").unwrap_err();
+        assert!(err.to_string().contains("http.token"), "{err}");
+        let err =
+            ServiceConfig::from_toml_str("[http]\ncors = [\"example.com\"]\n", "t").unwrap_err();
+        assert!(err.to_string().contains("example.com"), "{err}");
+        let err = ServiceConfig::from_toml_str("[http]\nlisten = \"nowhere\"\n", "t").unwrap_err();
+        assert!(err.to_string().contains("listen"), "{err}");
+        let err = ServiceConfig::from_toml_str("[zenoh]\nsite = \"a/b\"\n", "t").unwrap_err();
+        assert!(err.to_string().contains("a/b"), "{err}");
+        let err =
+            ServiceConfig::from_toml_str("[zenoh]\nlisten = [\"nonsense\"]\n", "t").unwrap_err();
+        assert!(err.to_string().contains("nonsense"), "{err}");
+        let ok = ServiceConfig::from_toml_str(
+            "[http]\ncors = [\"*\", \"http://localhost:3000\"]\nprotect_reads = true\n",
+            "t",
+        )
+        .unwrap();
+        assert!(ok.http.protect_reads);
     }
 }

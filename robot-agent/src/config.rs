@@ -1,9 +1,14 @@
-//! The agent's configuration: which controller drives, the robot's limits, and the safety
-//! thresholds that make it stop rather than drive on stale or doubtful information.
+//! The agent's configuration: which controller drives, the robot's limits, the safety
+//! thresholds that make it stop rather than drive on stale or doubtful information, and the
+//! nested parameters of localization (`[amcl]`) and of each controller.
 
 use std::path::PathBuf;
+use std::str::FromStr;
 
-use protocol::SiteId;
+use protocol::{MapName, Pose2D, SiteId};
+
+use crate::amcl::{AmclConfig, AmclError};
+use crate::controllers::{DynamicWindowConfig, PathTrackerConfig};
 
 /// Which controller turns observations and intentions into (v, ω).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -22,10 +27,64 @@ pub enum ControllerKind {
 }
 
 impl ControllerKind {
+    /// Every kind, in the order the command line lists them.
+    pub const ALL: [ControllerKind; 5] = [
+        Self::Dlm,
+        Self::Lpe,
+        Self::None,
+        Self::PathTracker,
+        Self::DynamicWindow,
+    ];
+
+    /// The name used in the configuration file and on the command line.
+    #[must_use]
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Dlm => "dlm",
+            Self::Lpe => "lpe",
+            Self::None => "none",
+            Self::PathTracker => "path-tracker",
+            Self::DynamicWindow => "dynamic-window",
+        }
+    }
+
+    /// The controller's name in `AgentStatus::controller`.
+    #[must_use]
+    pub fn status_name(self) -> &'static str {
+        match self {
+            Self::Dlm => "dlm_net",
+            Self::Lpe => "lpe_net",
+            Self::None => "non_intention_net",
+            Self::PathTracker => "path_tracker",
+            Self::DynamicWindow => "dynamic_window",
+        }
+    }
+
     /// Whether this controller runs a neural network and so needs a model file.
     #[must_use]
     pub fn needs_model(self) -> bool {
         matches!(self, Self::Dlm | Self::Lpe | Self::None)
+    }
+}
+
+impl std::fmt::Display for ControllerKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// A controller name that is none of [`ControllerKind::ALL`].
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown controller `{0}`: expected one of dlm, lpe, none, path-tracker, dynamic-window")]
+pub struct UnknownController(pub String);
+
+impl FromStr for ControllerKind {
+    type Err = UnknownController;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::ALL
+            .into_iter()
+            .find(|k| k.as_str() == s)
+            .ok_or_else(|| UnknownController(s.to_string()))
     }
 }
 
@@ -73,28 +132,97 @@ impl Default for Safety {
     }
 }
 
+/// Where the robot starts believing it is (the `[localization]` table).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Localization {
+    /// Initial pose in the map frame; `None` means global localization (particles spread over
+    /// the whole free space of the map).
+    pub initial_pose: Option<Pose2D>,
+    /// Standard deviation of the initial particle cloud in x and in y.
+    pub initial_position_std_m: f64,
+    /// Standard deviation of the initial particle cloud in heading.
+    pub initial_yaw_std_rad: f64,
+}
+
+impl Default for Localization {
+    fn default() -> Self {
+        Self {
+            initial_pose: None,
+            initial_position_std_m: 0.15,
+            initial_yaw_std_rad: 0.1,
+        }
+    }
+}
+
+impl Localization {
+    /// The initial covariance (3x3 row-major over x, y, yaw) from the standard deviations.
+    #[must_use]
+    pub fn initial_covariance(&self) -> [f64; 9] {
+        let p = self.initial_position_std_m * self.initial_position_std_m;
+        let y = self.initial_yaw_std_rad * self.initial_yaw_std_rad;
+        [p, 0.0, 0.0, 0.0, p, 0.0, 0.0, 0.0, y]
+    }
+}
+
+/// How ONNX Runtime runs the intention-net controllers (the `[intention_net]` table).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct IntentionNetSettings {
+    /// Threads ONNX Runtime may use inside one operator.
+    pub intra_threads: usize,
+}
+
+impl Default for IntentionNetSettings {
+    fn default() -> Self {
+        Self { intra_threads: 1 }
+    }
+}
+
 /// The whole agent configuration (TOML); every field has a default.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct AgentConfig {
     pub site: SiteId,
+    /// The floor plan to localize on, as the map store names it.
+    pub map: Option<MapName>,
+    /// The map version; `None` takes the latest the map store has.
+    pub map_version: Option<u32>,
     pub controller: ControllerKind,
     /// ONNX model for the network controllers.
     pub model: Option<PathBuf>,
     pub control_rate_hz: f64,
+    /// Rate of the periodic `AgentStatus` (it is also sent on every state change).
+    pub status_rate_hz: f64,
+    /// How long one map query waits for the map store before it is retried.
+    pub map_fetch_timeout_ms: u64,
     pub limits: Limits,
     pub safety: Safety,
+    pub localization: Localization,
+    pub amcl: AmclConfig,
+    pub path_tracker: PathTrackerConfig,
+    pub dynamic_window: DynamicWindowConfig,
+    pub intention_net: IntentionNetSettings,
 }
 
 impl Default for AgentConfig {
     fn default() -> Self {
         Self {
             site: SiteId::default(),
+            map: None,
+            map_version: None,
             controller: ControllerKind::DynamicWindow,
             model: None,
             control_rate_hz: 10.0,
+            status_rate_hz: 2.0,
+            map_fetch_timeout_ms: 2000,
             limits: Limits::default(),
             safety: Safety::default(),
+            localization: Localization::default(),
+            amcl: AmclConfig::default(),
+            path_tracker: PathTrackerConfig::default(),
+            dynamic_window: DynamicWindowConfig::default(),
+            intention_net: IntentionNetSettings::default(),
         }
     }
 }
@@ -104,6 +232,8 @@ impl Default for AgentConfig {
 pub enum ConfigError {
     #[error("cannot parse agent config: {0}")]
     Parse(#[from] toml::de::Error),
+    #[error("[amcl] {0}")]
+    Amcl(#[from] AmclError),
     #[error("invalid {field} = {value}: {reason}")]
     Invalid {
         field: &'static str,
@@ -130,6 +260,7 @@ impl AgentConfig {
     pub fn validate(&self) -> Result<(), ConfigError> {
         let positive = [
             ("control_rate_hz", self.control_rate_hz),
+            ("status_rate_hz", self.status_rate_hz),
             ("limits.max_speed_mps", self.limits.max_speed_mps),
             ("limits.max_turn_radps", self.limits.max_turn_radps),
             ("limits.max_accel_mps2", self.limits.max_accel_mps2),
@@ -156,6 +287,55 @@ impl AgentConfig {
                 reason: "must be at least 1 ms",
             });
         }
+        if self.map_fetch_timeout_ms == 0 {
+            return Err(ConfigError::Invalid {
+                field: "map_fetch_timeout_ms",
+                value: "0".into(),
+                reason: "must be at least 1 ms",
+            });
+        }
+        if self.map_version == Some(0) {
+            return Err(ConfigError::Invalid {
+                field: "map_version",
+                value: "0".into(),
+                reason: "map versions start at 1",
+            });
+        }
+        let l = &self.localization;
+        for (field, v) in [
+            (
+                "localization.initial_position_std_m",
+                l.initial_position_std_m,
+            ),
+            ("localization.initial_yaw_std_rad", l.initial_yaw_std_rad),
+        ] {
+            if !v.is_finite() || v < 0.0 {
+                return Err(ConfigError::Invalid {
+                    field,
+                    value: v.to_string(),
+                    reason: "must be a finite number >= 0",
+                });
+            }
+        }
+        if let Some(p) = l.initial_pose {
+            if p.validate("localization.initial_pose").is_err() {
+                return Err(ConfigError::Invalid {
+                    field: "localization.initial_pose",
+                    value: format!("({}, {}, {})", p.x_m, p.y_m, p.yaw_rad),
+                    reason: "must be finite",
+                });
+            }
+        }
+        if !(1..=64).contains(&self.intention_net.intra_threads) {
+            return Err(ConfigError::Invalid {
+                field: "intention_net.intra_threads",
+                value: self.intention_net.intra_threads.to_string(),
+                reason: "must lie in 1..=64",
+            });
+        }
+        self.amcl.validate()?;
+        self.path_tracker.validate()?;
+        self.dynamic_window.validate()?;
         if self.controller.needs_model() && self.model.is_none() {
             return Err(ConfigError::Invalid {
                 field: "model",
@@ -175,10 +355,43 @@ mod tests {
     fn example_file_parses_and_matches_defaults_where_it_says_so() {
         let text = include_str!("../agent.example.toml");
         let config = AgentConfig::from_toml(text).unwrap();
-        assert_eq!(config.controller, ControllerKind::DynamicWindow);
-        assert_eq!(config.safety, Safety::default());
-        assert_eq!(config.limits, Limits::default());
+        // Every value in the example is the default; drift between the two fails here.
+        assert_eq!(config, AgentConfig::default());
+        assert_eq!(config.amcl, AmclConfig::default());
+        assert_eq!(config.dynamic_window, DynamicWindowConfig::default());
         assert_eq!(config.site.as_str(), "default");
+        // The commented-out lines are valid too once uncommented.
+        let uncommented: String = text
+            .lines()
+            .map(|l| {
+                let t = l.trim_start();
+                for key in ["# map = ", "# map_version = ", "# initial_pose = "] {
+                    if t.starts_with(key) {
+                        return t.trim_start_matches("# ").to_string();
+                    }
+                }
+                l.to_string()
+            })
+            .collect::<Vec<_>>()
+            .join("\n");
+        let config = AgentConfig::from_toml(&uncommented).unwrap();
+        assert_eq!(config.map.unwrap().as_str(), "office");
+        assert_eq!(config.map_version, Some(1));
+        assert_eq!(
+            config.localization.initial_pose,
+            Some(Pose2D::new(3.0, 4.0, 0.0))
+        );
+    }
+
+    #[test]
+    fn controller_kinds_round_trip_through_their_names() {
+        for kind in ControllerKind::ALL {
+            assert_eq!(kind.as_str().parse::<ControllerKind>().unwrap(), kind);
+            let toml_text = format!("controller = \"{kind}\"\nmodel = \"m.onnx\"\n");
+            assert_eq!(AgentConfig::from_toml(&toml_text).unwrap().controller, kind);
+        }
+        let err = "teleport".parse::<ControllerKind>().unwrap_err();
+        assert!(err.to_string().contains("teleport"), "{err}");
     }
 
     #[test]
@@ -199,5 +412,21 @@ mod tests {
         assert!(err.to_string().contains("model"), "{err}");
         let err = AgentConfig::from_toml("controller = \"teleport\"\n").unwrap_err();
         assert!(err.to_string().contains("teleport"), "{err}");
+        let err = AgentConfig::from_toml("[amcl]\nmax_particles = 10\n").unwrap_err();
+        assert!(err.to_string().contains("max_particles = 10"), "{err}");
+        let err = AgentConfig::from_toml("[dynamic_window]\nv_samples = 1\n").unwrap_err();
+        assert!(
+            err.to_string().contains("dynamic_window.v_samples"),
+            "{err}"
+        );
+        let err =
+            AgentConfig::from_toml("[localization]\ninitial_yaw_std_rad = -1.0\n").unwrap_err();
+        assert!(
+            err.to_string()
+                .contains("localization.initial_yaw_std_rad = -1"),
+            "{err}"
+        );
+        let err = AgentConfig::from_toml("map = \"bad/name\"\n").unwrap_err();
+        assert!(err.to_string().contains("bad/name"), "{err}");
     }
 }

@@ -3,11 +3,16 @@
 //! - [`amcl`]: AMCL localization on the floor plan's likelihood field.
 //! - [`controllers`]: the controller trait and the controllers that implement it.
 //! - [`config`]: the agent's configuration.
+//! - [`node`]: the agent node on Zenoh (localization, control and safety loop); [`cli`]: the
+//!   `robot-agent` command line around it.
 
 pub mod amcl;
+pub mod cli;
 pub mod config;
 pub mod controllers;
+pub mod node;
 
 pub use amcl::{Amcl, AmclConfig, Estimate, LikelihoodField, UpdateOutcome};
-pub use config::{AgentConfig, ControllerKind, Limits, Safety};
+pub use config::{AgentConfig, ControllerKind, Limits, Localization, Safety};
 pub use controllers::{Control, ControlInput, Controller, ControllerError};
+pub use node::{NodeError, NodeOptions, Supervisor};

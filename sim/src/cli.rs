@@ -188,26 +188,25 @@ pub fn run(cli: Cli) -> Result<()> {
                 cmd_timeout_ms,
             };
             driver_config.validate()?;
+            // Where the robots stand, for whoever starts their agents (the fleet demo reads it).
+            for (i, id) in world.robot_ids().iter().enumerate() {
+                if let Some(p) = world.ground_truth_pose(i) {
+                    println!("robot {id} at {:.3},{:.3},{:.4}", p.x_m, p.y_m, p.yaw_rad);
+                }
+            }
             let rt = tokio::runtime::Runtime::new()?;
             rt.block_on(async move {
-                let mut zc = zenoh::Config::default();
-                if !listen.is_empty() {
-                    zc.insert_json5("listen/endpoints", &serde_json::to_string(&listen)?)
-                        .map_err(|e| anyhow::anyhow!("invalid --listen {listen:?}: {e}"))?;
-                }
-                if !connect.is_empty() {
-                    zc.insert_json5("connect/endpoints", &serde_json::to_string(&connect)?)
-                        .map_err(|e| anyhow::anyhow!("invalid --connect {connect:?}: {e}"))?;
-                }
+                // Explicit endpoints mean no multicast discovery (two demos on one host must not
+                // drive each other's robots); with none, plain Zenoh defaults find peers.
+                let zc = if listen.is_empty() && connect.is_empty() {
+                    zenoh::Config::default()
+                } else {
+                    protocol::zenoh_io::peer_config(&listen, &connect)?
+                };
                 let session = zenoh::open(zc)
                     .await
                     .map_err(|e| anyhow::anyhow!("cannot open zenoh session: {e}"))?;
-                let shutdown = async {
-                    if let Err(e) = tokio::signal::ctrl_c().await {
-                        tracing::error!("cannot wait for Ctrl-C: {e}");
-                    }
-                };
-                driver::run(&session, world, &site, driver_config, shutdown).await?;
+                driver::run(&session, world, &site, driver_config, terminated()).await?;
                 session
                     .close()
                     .await
@@ -381,4 +380,31 @@ pub fn bench(scenario: &Path, frames: usize) -> Result<BenchResult> {
         lockstep_with_camera_steps_per_s: rate(steps, step_cam_s),
         threads: 1,
     })
+}
+
+/// Completes on Ctrl-C or SIGTERM (how the fleet demo stops its children).
+async fn terminated() {
+    #[cfg(unix)]
+    {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut term) => {
+                tokio::select! {
+                    r = tokio::signal::ctrl_c() => if let Err(e) = r {
+                        tracing::error!("cannot wait for Ctrl-C: {e}");
+                    },
+                    _ = term.recv() => {}
+                }
+            }
+            Err(e) => {
+                tracing::error!("cannot wait for SIGTERM: {e}");
+                if let Err(e) = tokio::signal::ctrl_c().await {
+                    tracing::error!("cannot wait for Ctrl-C: {e}");
+                }
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    if let Err(e) = tokio::signal::ctrl_c().await {
+        tracing::error!("cannot wait for Ctrl-C: {e}");
+    }
 }

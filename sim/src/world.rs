@@ -429,6 +429,40 @@ impl World {
         Ok(index)
     }
 
+    /// A person carries robot `index` to the true pose `pose` (the evaluation harness's human
+    /// intervention): the robot stands still there and its odometry does not see the move, as
+    /// the wheels did not turn.
+    ///
+    /// # Errors
+    /// [`SimError::NoSuchRobot`], or [`SimError::Blocked`] (nothing moved) when the pose overlaps
+    /// something other than the robot itself.
+    pub fn carry_robot(&mut self, index: usize, pose: Pose2D) -> Result<(), SimError> {
+        let count = self.robots.len();
+        let robot_id = match self.robots.get(index) {
+            Some(r) => r.id.to_string(),
+            None => return Err(SimError::NoSuchRobot { index, count }),
+        };
+        if let Some(with) = self.disc_overlap(
+            pose.x_m,
+            pose.y_m,
+            self.config.base.radius_m,
+            Some(index),
+            true,
+        ) {
+            return Err(SimError::Blocked {
+                robot_id,
+                x_m: pose.x_m,
+                y_m: pose.y_m,
+                with,
+            });
+        }
+        let robot = &mut self.robots[index];
+        robot.pose = pose;
+        robot.v_mps = 0.0;
+        robot.omega_radps = 0.0;
+        Ok(())
+    }
+
     /// Places `n` robots named `robot_1..n`: the first at the scenario start, the others at free
     /// poses found on rings around it (deterministic).
     ///
@@ -474,20 +508,60 @@ impl World {
         let rr = self.config.base.radius_m;
         for i in 0..self.people.len() {
             let p = &self.people[i];
-            let (x, y, target, forward) = p.advanced(p.speed_mps * dt);
-            // People wait rather than walk into a robot: the robot's collisions are its own doing.
-            let blocked = self
-                .robots
-                .iter()
-                .any(|r| (r.pose.x_m - x).hypot(r.pose.y_m - y) < p.radius_m + rr + 0.05);
-            if !blocked {
-                let p = &mut self.people[i];
-                p.walked_m += (x - p.x_m).hypot(y - p.y_m);
-                p.x_m = x;
-                p.y_m = y;
-                p.target = target;
-                p.forward = forward;
-            }
+            let step_m = p.speed_mps * dt;
+            let (x, y, target, forward) = p.advanced(step_m);
+            // People do not walk into a robot: the robot's collisions are its own doing.
+            let near_robot = |x: f64, y: f64| {
+                self.robots
+                    .iter()
+                    .map(|r| (r.pose.x_m, r.pose.y_m))
+                    .find(|r| (r.0 - x).hypot(r.1 - y) < p.radius_m + rr + 0.05)
+            };
+            let (x, y, target, forward) = match near_robot(x, y) {
+                None => (x, y, target, forward),
+                // A robot in the way: step aside, away from it, where nothing else is, and walk
+                // on from there (the route leads back to its next point). Merely waiting would
+                // deadlock against a robot that waits for the person to pass.
+                Some(r) => {
+                    let (dx, dy) = (x - p.x_m, y - p.y_m);
+                    let len = dx.hypot(dy);
+                    if len < 1e-9 {
+                        continue;
+                    }
+                    let (ux, uy) = (dx / len, dy / len);
+                    // The normal of the walking direction on the side away from the robot.
+                    let away = if ux * (r.1 - p.y_m) - uy * (r.0 - p.x_m) > 0.0 {
+                        -1.0
+                    } else {
+                        1.0
+                    };
+                    let (nx, ny) = (-uy * away, ux * away);
+                    let free = |x: f64, y: f64| {
+                        near_robot(x, y).is_none()
+                            && self.disc_overlap(x, y, p.radius_m, None, false).is_none()
+                    };
+                    // Sideways, or diagonally forward and aside.
+                    let h = std::f64::consts::FRAC_1_SQRT_2;
+                    let sideways = [
+                        (
+                            p.x_m + (ux + nx) * h * step_m,
+                            p.y_m + (uy + ny) * h * step_m,
+                        ),
+                        (p.x_m + nx * step_m, p.y_m + ny * step_m),
+                    ];
+                    // The route point being walked to stays the same: it was not reached.
+                    match sideways.into_iter().find(|&(x, y)| free(x, y)) {
+                        Some((x, y)) => (x, y, p.target, p.forward),
+                        None => continue,
+                    }
+                }
+            };
+            let p = &mut self.people[i];
+            p.walked_m += (x - p.x_m).hypot(y - p.y_m);
+            p.x_m = x;
+            p.y_m = y;
+            p.target = target;
+            p.forward = forward;
         }
     }
 

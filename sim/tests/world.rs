@@ -548,3 +548,40 @@ fn rotated_nav2_plan_lidar_matches_distance_field() {
     );
     assert_eq!(world.render_camera(0).unwrap().data.len(), 224 * 224 * 3);
 }
+
+#[test]
+fn a_person_steps_around_a_robot_standing_in_the_way() {
+    // Task A's person walks along y = 10 from x = 5 to 21; a robot stands on the route.
+    let mut w = world("task_a");
+    w.add_robot(id("robot_1"), Pose2D::new(10.0, 10.0, 0.0))
+        .unwrap();
+    let x0 = w.people[0].x_m;
+    assert!(x0 < 8.0, "{x0}");
+    let mut passed = false;
+    for _ in 0..200 {
+        let obs = w.step(&[], 0.1);
+        assert!(obs.robots[0].collisions.is_empty());
+        let p = &w.people[0];
+        let r = w.ground_truth_pose(0).unwrap();
+        assert!((p.x_m - r.x_m).hypot(p.y_m - r.y_m) >= p.radius_m + 0.25 - 1e-9);
+        passed |= p.x_m > 11.0;
+    }
+    assert!(passed, "the person never got past the robot");
+}
+
+#[test]
+fn carrying_a_robot_moves_the_truth_but_not_the_odometry() {
+    let mut w = world("task_a");
+    w.add_robots_at_start(1).unwrap();
+    let before = w.step(&[], 0.1).robots[0].odom.pose;
+    let put = Pose2D::new(4.0, 4.2, 0.5);
+    w.carry_robot(0, put).unwrap();
+    assert_eq!(w.ground_truth_pose(0), Some(put));
+    let after = w.step(&[], 0.1).robots[0].odom.pose;
+    assert!(before.distance_m(&after) < 1e-9, "{before:?} {after:?}");
+    // Into a wall: refused, nothing moves.
+    let err = w.carry_robot(0, Pose2D::new(0.0, 0.0, 0.0)).unwrap_err();
+    assert!(err.to_string().contains("overlap"), "{err}");
+    assert_eq!(w.ground_truth_pose(0), Some(put));
+    assert!(w.carry_robot(3, put).is_err());
+}

@@ -1,5 +1,463 @@
-//! Multi-process end-to-end tests over real Zenoh sessions live in `tests/` of this crate.
+//! Multi-process end-to-end harness: starts the real binaries (planner service, simulator,
+//! robot agents) as separate processes talking over Zenoh on loopback, and drives them over
+//! HTTP the way an operator does with curl.
 //!
-//! They start the real binaries (map store, simulator, agents, planner service) as separate
-//! processes on loopback and drive them over HTTP and Zenoh; they arrive with the planner
-//! service, which is the first piece that needs all the others.
+//! The binaries come from the cargo target folder of the test executable
+//! (`target/<profile>/`), or from `FLEET_BIN_DIR`; `scripts/test.sh` builds them before the
+//! tests run. Every process is killed when its handle drops, so a failing test leaves nothing
+//! behind.
+
+use std::io::{BufRead, BufReader};
+use std::net::TcpListener;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+/// A harness failure, with what was being done.
+#[derive(Debug, thiserror::Error)]
+pub enum HarnessError {
+    #[error("{0}")]
+    Setup(String),
+    #[error("{what}: {source}")]
+    Io {
+        what: String,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("HTTP {what}: {reason}")]
+    Http { what: String, reason: String },
+    #[error("timed out after {after:?} waiting for {what}")]
+    Timeout { what: String, after: Duration },
+}
+
+type Result<T> = std::result::Result<T, HarnessError>;
+
+fn io(what: impl Into<String>) -> impl FnOnce(std::io::Error) -> HarnessError {
+    let what = what.into();
+    move |source| HarnessError::Io { what, source }
+}
+
+/// The folder with `planner-service`, `sim` and `robot-agent`.
+///
+/// # Errors
+/// [`HarnessError::Setup`] naming the missing binary and how to build it.
+pub fn bin_dir() -> Result<PathBuf> {
+    let dir = match std::env::var_os("FLEET_BIN_DIR") {
+        Some(d) => PathBuf::from(d),
+        None => {
+            let exe = std::env::current_exe().map_err(io("locate the test executable"))?;
+            // target/<profile>/deps/<test> → target/<profile>
+            exe.parent()
+                .and_then(Path::parent)
+                .map(Path::to_path_buf)
+                .ok_or_else(|| HarnessError::Setup("test executable has no folder".into()))?
+        }
+    };
+    for name in ["planner-service", "sim", "robot-agent"] {
+        if !dir.join(name).is_file() {
+            return Err(HarnessError::Setup(format!(
+                "no {name} in {}: run `cargo build --workspace --bins` first (scripts/test.sh does)",
+                dir.display()
+            )));
+        }
+    }
+    Ok(dir)
+}
+
+/// The repository root (for the scenarios and floor plans).
+#[must_use]
+pub fn repo_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// A TCP port that was free a moment ago (for endpoints that must stay the same across a
+/// restart of the service).
+///
+/// # Errors
+/// If no port can be bound.
+pub fn free_port() -> Result<u16> {
+    let l = TcpListener::bind("127.0.0.1:0").map_err(io("bind a free port"))?;
+    Ok(l.local_addr().map_err(io("read the free port"))?.port())
+}
+
+/// A child process killed (SIGKILL) when dropped, with its output lines on a channel.
+pub struct Proc {
+    pub name: String,
+    child: Child,
+    lines: mpsc::Receiver<String>,
+}
+
+impl Proc {
+    /// Starts `bin` with `args`; stdout and stderr lines are collected (and echoed to the
+    /// test's stderr prefixed with `name`, so a failing test shows them).
+    ///
+    /// # Errors
+    /// If the process cannot start.
+    pub fn spawn(name: &str, bin: &Path, args: &[String]) -> Result<Self> {
+        let mut child = Command::new(bin)
+            .args(args)
+            .env(
+                "RUST_LOG",
+                std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()),
+            )
+            .env_remove("RUST_BACKTRACE")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .map_err(io(format!("start {}", bin.display())))?;
+        let (tx, rx) = mpsc::channel();
+        let streams: Vec<Box<dyn std::io::Read + Send>> = [
+            child
+                .stdout
+                .take()
+                .map(|s| Box::new(s) as Box<dyn std::io::Read + Send>),
+            child
+                .stderr
+                .take()
+                .map(|s| Box::new(s) as Box<dyn std::io::Read + Send>),
+        ]
+        .into_iter()
+        .flatten()
+        .collect();
+        for stream in streams {
+            let tx = tx.clone();
+            let label = name.to_string();
+            std::thread::spawn(move || {
+                for line in BufReader::new(stream)
+                    .lines()
+                    .map_while(std::result::Result::ok)
+                {
+                    eprintln!("[{label}] {line}");
+                    if tx.send(line).is_err() {
+                        // Keep draining so the child never blocks on a full pipe.
+                    }
+                }
+            });
+        }
+        Ok(Self {
+            name: name.to_string(),
+            child,
+            lines: rx,
+        })
+    }
+
+    /// Waits for an output line for which `pick` returns something.
+    ///
+    /// # Errors
+    /// [`HarnessError::Timeout`], or [`HarnessError::Setup`] when the process exits first.
+    pub fn wait_line<T>(
+        &mut self,
+        timeout: Duration,
+        mut pick: impl FnMut(&str) -> Option<T>,
+    ) -> Result<T> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self
+                .lines
+                .recv_timeout(left.min(Duration::from_millis(200)))
+            {
+                Ok(line) => {
+                    if let Some(v) = pick(&line) {
+                        return Ok(v);
+                    }
+                }
+                Err(mpsc::RecvTimeoutError::Timeout) => {
+                    if let Ok(Some(status)) = self.child.try_wait() {
+                        return Err(HarnessError::Setup(format!(
+                            "{} exited ({status})",
+                            self.name
+                        )));
+                    }
+                    if left.is_zero() {
+                        return Err(HarnessError::Timeout {
+                            what: format!("output of {}", self.name),
+                            after: timeout,
+                        });
+                    }
+                }
+                Err(mpsc::RecvTimeoutError::Disconnected) => {
+                    return Err(HarnessError::Setup(format!(
+                        "{} closed its output",
+                        self.name
+                    )));
+                }
+            }
+        }
+    }
+
+    /// Kills the process at once (a crash, as far as the others can tell).
+    pub fn kill(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+
+    /// Whether it still runs.
+    pub fn is_running(&mut self) -> bool {
+        matches!(self.child.try_wait(), Ok(None))
+    }
+
+    #[must_use]
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        self.kill();
+    }
+}
+
+/// A running planner service.
+pub struct Service {
+    pub proc: Proc,
+    pub url: String,
+    pub token: String,
+    /// The Zenoh endpoint robots connect to.
+    pub zenoh: String,
+}
+
+impl Service {
+    /// Starts `planner-service serve` on a free HTTP port with its Zenoh listener on
+    /// `zenoh_port` (fixed, so robots find a restarted service again).
+    ///
+    /// # Errors
+    /// If it does not print its address within 60 s.
+    pub fn start(bins: &Path, data_dir: &Path, zenoh_port: u16, token: &str) -> Result<Self> {
+        let zenoh = format!("tcp/127.0.0.1:{zenoh_port}");
+        let args: Vec<String> = vec![
+            "serve".into(),
+            "--listen".into(),
+            "127.0.0.1:0".into(),
+            "--data-dir".into(),
+            data_dir.display().to_string(),
+            "--token".into(),
+            token.into(),
+            "--zenoh-listen".into(),
+            zenoh.clone(),
+        ];
+        let mut proc = Proc::spawn("service", &bins.join("planner-service"), &args)?;
+        let url = proc.wait_line(Duration::from_secs(60), |l| {
+            l.strip_prefix("listening on ")
+                .map(|u| u.trim().to_string())
+        })?;
+        Ok(Self {
+            proc,
+            url,
+            token: token.into(),
+            zenoh,
+        })
+    }
+
+    fn client() -> Result<reqwest::blocking::Client> {
+        reqwest::blocking::Client::builder()
+            .timeout(Duration::from_secs(30))
+            .build()
+            .map_err(|e| HarnessError::Http {
+                what: "client".into(),
+                reason: e.to_string(),
+            })
+    }
+
+    /// GET a JSON document.
+    ///
+    /// # Errors
+    /// Transport failures or a non-2xx status (with the body).
+    pub fn get(&self, path: &str) -> Result<Value> {
+        let resp = Self::client()?
+            .get(format!("{}{path}", self.url))
+            .send()
+            .map_err(|e| http_err(path, &e))?;
+        json_of(path, resp)
+    }
+
+    /// POST JSON with the token; returns (status, body).
+    ///
+    /// # Errors
+    /// Transport failures.
+    pub fn post(&self, path: &str, body: &Value) -> Result<(u16, Value)> {
+        let resp = Self::client()?
+            .post(format!("{}{path}", self.url))
+            .bearer_auth(&self.token)
+            .json(body)
+            .send()
+            .map_err(|e| http_err(path, &e))?;
+        let status = resp.status().as_u16();
+        let text = resp.text().map_err(|e| http_err(path, &e))?;
+        let value = serde_json::from_str(&text).unwrap_or(Value::String(text));
+        Ok((status, value))
+    }
+
+    /// Uploads a ROS floor plan (YAML + image) as multipart.
+    ///
+    /// # Errors
+    /// Transport failures or a non-2xx status.
+    pub fn upload_ros_map(&self, name: &str, yaml: &Path) -> Result<Value> {
+        let text = std::fs::read_to_string(yaml).map_err(io(format!("read {}", yaml.display())))?;
+        let image_name = text
+            .lines()
+            .find_map(|l| l.trim().strip_prefix("image:"))
+            .map(|v| v.trim().trim_matches(['\'', '"']).to_string())
+            .ok_or_else(|| HarnessError::Setup(format!("{} names no image", yaml.display())))?;
+        let image_path = yaml.parent().unwrap_or(Path::new(".")).join(&image_name);
+        let image =
+            std::fs::read(&image_path).map_err(io(format!("read {}", image_path.display())))?;
+        let form = reqwest::blocking::multipart::Form::new()
+            .text("name", name.to_string())
+            .part(
+                "yaml",
+                reqwest::blocking::multipart::Part::text(text).file_name("map.yaml"),
+            )
+            .part(
+                "image",
+                reqwest::blocking::multipart::Part::bytes(image).file_name(image_name),
+            );
+        let resp = Self::client()?
+            .post(format!("{}/api/v1/maps", self.url))
+            .bearer_auth(&self.token)
+            .multipart(form)
+            .send()
+            .map_err(|e| http_err("/api/v1/maps", &e))?;
+        json_of("/api/v1/maps", resp)
+    }
+
+    /// Polls `path` until `pick` returns something.
+    ///
+    /// # Errors
+    /// [`HarnessError::Timeout`] with the last document seen.
+    pub fn wait_for<T>(
+        &self,
+        path: &str,
+        timeout: Duration,
+        mut pick: impl FnMut(&Value) -> Option<T>,
+    ) -> Result<T> {
+        let deadline = Instant::now() + timeout;
+        let mut last = Value::Null;
+        loop {
+            if let Ok(v) = self.get(path) {
+                if let Some(t) = pick(&v) {
+                    return Ok(t);
+                }
+                last = v;
+            }
+            if Instant::now() > deadline {
+                return Err(HarnessError::Timeout {
+                    what: format!("{path} (last: {})", truncate(&last.to_string(), 600)),
+                    after: timeout,
+                });
+            }
+            std::thread::sleep(Duration::from_millis(250));
+        }
+    }
+}
+
+fn truncate(s: &str, n: usize) -> &str {
+    match s.char_indices().nth(n) {
+        Some((i, _)) => &s[..i],
+        None => s,
+    }
+}
+
+fn http_err(what: &str, e: &reqwest::Error) -> HarnessError {
+    HarnessError::Http {
+        what: what.into(),
+        reason: e.to_string(),
+    }
+}
+
+fn json_of(what: &str, resp: reqwest::blocking::Response) -> Result<Value> {
+    let status = resp.status();
+    let text = resp.text().map_err(|e| http_err(what, &e))?;
+    if !status.is_success() {
+        return Err(HarnessError::Http {
+            what: what.into(),
+            reason: format!("{status}: {text}"),
+        });
+    }
+    serde_json::from_str(&text).map_err(|e| HarnessError::Http {
+        what: what.into(),
+        reason: format!("not JSON ({e}): {text}"),
+    })
+}
+
+/// The simulator with its robots' start poses (`x,y,yaw`).
+pub struct Sim {
+    pub proc: Proc,
+    pub robots: Vec<(String, String)>,
+}
+
+impl Sim {
+    /// Starts `sim run` on `scenario` with `robots` robots connected to `zenoh`.
+    ///
+    /// # Errors
+    /// If it does not report its robots within 60 s.
+    pub fn start(bins: &Path, scenario: &Path, robots: usize, zenoh: &str) -> Result<Self> {
+        let args: Vec<String> = vec![
+            "run".into(),
+            "--scenario".into(),
+            scenario.display().to_string(),
+            "--robots".into(),
+            robots.to_string(),
+            "--connect".into(),
+            zenoh.into(),
+        ];
+        let mut proc = Proc::spawn("sim", &bins.join("sim"), &args)?;
+        let mut found = Vec::new();
+        while found.len() < robots {
+            let r = proc.wait_line(Duration::from_secs(60), |l| {
+                let rest = l.strip_prefix("robot ")?;
+                let (id, pose) = rest.split_once(" at ")?;
+                Some((id.to_string(), pose.trim().to_string()))
+            })?;
+            found.push(r);
+        }
+        Ok(Self {
+            proc,
+            robots: found,
+        })
+    }
+}
+
+/// Starts a robot agent for `robot` at `pose` (`x,y,yaw`) on `map`.
+///
+/// # Errors
+/// If it cannot start.
+pub fn start_agent(
+    bins: &Path,
+    robot: &str,
+    pose: &str,
+    map: &str,
+    controller: &str,
+    zenoh: &str,
+) -> Result<Proc> {
+    let args: Vec<String> = vec![
+        "--robot-id".into(),
+        robot.into(),
+        "--controller".into(),
+        controller.into(),
+        "--map".into(),
+        map.into(),
+        "--initial-pose".into(),
+        pose.into(),
+        "--connect".into(),
+        zenoh.into(),
+        "--no-multicast".into(),
+    ];
+    Proc::spawn(&format!("agent {robot}"), &bins.join("robot-agent"), &args)
+}
+
+/// The robot `id` in a robot list.
+#[must_use]
+pub fn robot<'a>(robots: &'a Value, id: &str) -> Option<&'a Value> {
+    robots.as_array()?.iter().find(|r| r["id"] == id)
+}
+
+/// The `state.kind` of a task document.
+#[must_use]
+pub fn state_kind(task: &Value) -> &str {
+    task["state"]["kind"].as_str().unwrap_or("")
+}

@@ -722,7 +722,13 @@ mod tests {
 
     #[test]
     fn gating_runs_the_filter_only_after_enough_motion() {
-        let mut a = Amcl::new(AmclConfig::default(), room()).unwrap();
+        // Nav2's thresholds, coarser than the defaults, so that the steps below stay under them.
+        let config = AmclConfig {
+            update_min_d_m: 0.25,
+            update_min_a_rad: 0.2,
+            ..AmclConfig::default()
+        };
+        let mut a = Amcl::new(config, room()).unwrap();
         a.set_initial_pose(Pose2D::new(5.0, 3.0, 0.0), [0.0; 9])
             .unwrap();
         assert!(!a.update(&odom(0.0, 0.0, 0.0), None).unwrap().filter_ran);

@@ -12,7 +12,8 @@
 //!
 //! Arcs on which the robot could not brake before touching an obstacle (one cycle at (v, ω),
 //! then full deceleration along the arc) are not admissible. If none is, it brakes as hard as the
-//! window allows, steering along the freest arc. The robot never reverses.
+//! window allows (from the lower of the measured and the last commanded speed), steering along
+//! the freest arc. The robot never reverses.
 //!
 //! One addition to Fox: an obstacle lying on the path (the floor plan does not show it, so the
 //! planner's path runs through it) hides the look-ahead point, and heading straight for it traps
@@ -691,10 +692,17 @@ impl Controller for DynamicWindow {
                 }
             }
         }
+        // Braking starts from the last command when that was slower than the odometry says: the
+        // window is centred on the odometry's speed, which is noisy (±15 % per cycle on the
+        // simulated base), and a lower edge computed from an overestimate kept the robot at full
+        // speed into furniture.
+        let brake_v = self.last.map_or(v_lo, |l| {
+            v_lo.min((l.v_mps - limits.max_accel_mps2 * input.dt_s).max(0.0))
+        });
         let mut choice = match (best, freest) {
             (Some(b), _) => b,
             (None, Some((free_m, w))) => Choice {
-                v_mps: v_lo,
+                v_mps: brake_v,
                 omega_radps: w,
                 score: f64::NAN,
                 free_m,
@@ -704,7 +712,7 @@ impl Controller for DynamicWindow {
             },
             // linspace always yields v_lo first, so `freest` is set whenever a sample exists.
             (None, None) => Choice {
-                v_mps: v_lo,
+                v_mps: brake_v,
                 omega_radps: 0.0f64.clamp(w_lo, w_hi),
                 score: f64::NAN,
                 free_m: 0.0,
@@ -849,8 +857,11 @@ mod tests {
                 -limits.max_turn_radps,
                 limits.max_turn_radps,
             );
+            // Within the window, or braking harder when no arc is admissible.
+            let braking = dwa.last_choice().is_some_and(|ch| ch.admissible == 0);
             assert!(
-                cv >= v_lo - 1e-9 && cv <= v_hi + 1e-9,
+                (braking && cv >= 0.0 && cv <= v_lo + 1e-9)
+                    || (cv >= v_lo - 1e-9 && cv <= v_hi + 1e-9),
                 "v {cv} not in [{v_lo}, {v_hi}] from {v}"
             );
             assert!(

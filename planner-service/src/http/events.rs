@@ -1,0 +1,76 @@
+//! `GET /api/v1/events`: the live event stream (Server-Sent Events) of the dashboard.
+//!
+//! The subscription to the fleet's event bus is taken before the snapshot is read, so no
+//! change falls between the two (a change may show in both, which is harmless: events carry
+//! whole objects). A subscriber that falls behind the bus's buffer skips what it missed and
+//! goes on with the next events; the stream ends when the server shuts down.
+
+use std::convert::Infallible;
+use std::time::Duration;
+
+use axum::extract::State;
+use axum::response::sse::{Event, KeepAlive, Sse};
+use futures::stream::{self, Stream, StreamExt};
+use serde::Serialize;
+use tokio::sync::broadcast::error::RecvError;
+
+use super::error::ApiError;
+use super::state::AppState;
+use crate::fleet::{RobotView, Task, TaskFilter};
+
+/// Interval of the `: keep-alive` comment lines.
+pub const KEEP_ALIVE: Duration = Duration::from_secs(15);
+
+#[derive(Serialize)]
+struct Snapshot {
+    robots: Vec<RobotView>,
+    tasks: Vec<Task>,
+}
+
+fn json_event(name: &str, data: &impl Serialize) -> Event {
+    Event::default()
+        .event(name)
+        .json_data(data)
+        .unwrap_or_else(|e| {
+            // Only a non-string map key can fail here, and the fleet's types have none.
+            tracing::error!(event = name, "cannot serialize event: {e}");
+            Event::default().comment("unserializable event dropped")
+        })
+}
+
+/// `GET /api/v1/events`.
+pub async fn events(
+    State(state): State<AppState>,
+) -> Result<Sse<impl Stream<Item = Result<Event, Infallible>>>, ApiError> {
+    let rx = state.fleet.subscribe();
+    let fleet = state.fleet.clone();
+    let snapshot = tokio::task::spawn_blocking(move || {
+        Ok::<_, ApiError>(Snapshot {
+            robots: fleet.robots(),
+            // The newest tasks, whatever their state: active ones and recent history.
+            tasks: fleet.tasks(&TaskFilter::default())?,
+        })
+    })
+    .await??;
+    let first = stream::once(async move { json_event("snapshot", &snapshot) });
+    let shutdown = state.shutdown.clone();
+    let live = stream::unfold(rx, move |mut rx| {
+        let mut shutdown = shutdown.clone();
+        async move {
+            loop {
+                tokio::select! {
+                    _ = shutdown.wait_for(|stop| *stop) => return None,
+                    r = rx.recv() => match r {
+                        Ok(ev) => return Some((json_event(ev.event_name(), &ev), rx)),
+                        Err(RecvError::Lagged(n)) => {
+                            tracing::debug!(skipped = n, "slow event-stream client skipped events");
+                        }
+                        Err(RecvError::Closed) => return None,
+                    },
+                }
+            }
+        }
+    });
+    Ok(Sse::new(first.chain(live).map(Ok))
+        .keep_alive(KeepAlive::new().interval(KEEP_ALIVE).text("keep-alive")))
+}

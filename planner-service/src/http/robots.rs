@@ -1,0 +1,68 @@
+//! Robot routes: the registry as the fleet sees it, and each robot's latest LPE image and
+//! camera frame.
+
+use axum::extract::{Path as UrlPath, State};
+use axum::http::header;
+use axum::response::{IntoResponse, Response};
+use axum::Json;
+use protocol::RobotId;
+
+use super::error::ApiError;
+use super::state::AppState;
+use crate::fleet::RobotView;
+
+/// `GET /api/v1/robots`, sorted by id.
+pub async fn list(State(state): State<AppState>) -> Json<Vec<RobotView>> {
+    Json(state.fleet.robots())
+}
+
+/// `GET /api/v1/robots/{id}`.
+pub async fn get(
+    State(state): State<AppState>,
+    UrlPath(id): UrlPath<String>,
+) -> Result<Json<RobotView>, ApiError> {
+    let id = RobotId::new(id)?;
+    state
+        .fleet
+        .robot(&id)
+        .map(Json)
+        .ok_or_else(|| ApiError::not_found(format!("no robot {id}")))
+}
+
+fn image(content_type: &'static str, bytes: Vec<u8>) -> Response {
+    (
+        [
+            (header::CONTENT_TYPE, content_type),
+            // A live picture: never serve a stale copy.
+            (header::CACHE_CONTROL, "no-store"),
+        ],
+        bytes,
+    )
+        .into_response()
+}
+
+/// `GET /api/v1/robots/{id}/lpe.png`.
+pub async fn lpe_png(
+    State(state): State<AppState>,
+    UrlPath(id): UrlPath<String>,
+) -> Result<Response, ApiError> {
+    let id = RobotId::new(id)?;
+    let fleet = state.fleet.clone();
+    let lookup = id.clone();
+    let png = tokio::task::spawn_blocking(move || fleet.robot_lpe_png(&lookup)).await?;
+    png.map(|b| image("image/png", b))
+        .ok_or_else(|| ApiError::not_found(format!("no LPE image of robot {id}")))
+}
+
+/// `GET /api/v1/robots/{id}/camera.jpg`.
+pub async fn camera_jpg(
+    State(state): State<AppState>,
+    UrlPath(id): UrlPath<String>,
+) -> Result<Response, ApiError> {
+    let id = RobotId::new(id)?;
+    let fleet = state.fleet.clone();
+    let lookup = id.clone();
+    let jpeg = tokio::task::spawn_blocking(move || fleet.robot_camera_jpeg(&lookup)).await?;
+    jpeg.map(|b| image("image/jpeg", b))
+        .ok_or_else(|| ApiError::not_found(format!("no camera frame of robot {id}")))
+}

@@ -1,0 +1,756 @@
+//! The agent node: one robot's localization, controller and safety loop on Zenoh (DESIGN §2).
+//!
+//! [`run`] opens a Zenoh session, declares the robot's liveliness token, fetches its floor plan
+//! from the map store, and then, until the shutdown future completes:
+//!
+//! - runs AMCL on every laser scan (with the odometry of that instant) and publishes the
+//!   [`PoseEstimate`] on `pose`;
+//! - at `control_rate_hz` builds a [`ControlInput`] from the pose advanced by odometry, the
+//!   newest scan, camera frame and fresh intention, asks the controller, scales μ by the limits,
+//!   applies acceleration limits and publishes [`CmdVel`];
+//! - applies the safety rules: no intention, a stale one, lost localization or a controller
+//!   error decelerate the robot to a stop with the reason in its [`AgentStatus`]; driving
+//!   resumes by itself when the cause goes away;
+//! - publishes [`AgentStatus`] at `status_rate_hz` and on every state change.
+//!
+//! The decision part ([`Supervisor`]) is plain data in, command out, so it is tested without
+//! Zenoh; [`run`] is the I/O shell around it.
+
+use std::collections::VecDeque;
+use std::future::Future;
+use std::sync::Arc;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use map_store::OccupancyGrid;
+use protocol::keys::{self, RobotTopic};
+use protocol::{
+    AgentState, AgentStatus, CameraFrame, CmdVel, Dlm, Header, Intention, LaserScan, MapGrid,
+    MapRef, Odometry, Pose2D, PoseEstimate, RobotId, StopReason,
+};
+use zenoh::handlers::RingChannel;
+use zenoh::Session;
+
+use crate::amcl::{Amcl, AmclError, LikelihoodField};
+use crate::config::{AgentConfig, ConfigError, ControllerKind, Limits};
+use crate::controllers::{
+    Control, ControlInput, Controller, DynamicWindow, IntentionNet, IntentionNetError,
+    IntentionNetOptions, PathTracker,
+};
+
+/// Why the node could not start or had to stop.
+#[derive(Debug, thiserror::Error)]
+pub enum NodeError {
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    #[error(transparent)]
+    Model(#[from] IntentionNetError),
+    #[error("zenoh: cannot {action}: {reason}")]
+    Zenoh {
+        action: &'static str,
+        reason: String,
+    },
+    #[error(transparent)]
+    Publish(#[from] protocol::PublishError),
+    #[error("map {name}: {reason}")]
+    Map { name: String, reason: String },
+    #[error("localization: {0}")]
+    Amcl(#[from] AmclError),
+}
+
+fn zenoh_err(action: &'static str) -> impl FnOnce(zenoh::Error) -> NodeError {
+    move |e| NodeError::Zenoh {
+        action,
+        reason: e.to_string(),
+    }
+}
+
+/// The Zenoh configuration of an agent: a peer with the given endpoints.
+///
+/// `multicast_scouting` keeps Zenoh's default discovery of peers on the LAN (the command line's
+/// default); tests turn it off so that they only ever meet their own sessions.
+///
+/// # Errors
+/// [`NodeError::Zenoh`] naming an endpoint list or setting Zenoh refused.
+pub fn zenoh_config(
+    listen: &[String],
+    connect: &[String],
+    multicast_scouting: bool,
+) -> Result<zenoh::Config, NodeError> {
+    let mut config = protocol::peer_config(listen, connect).map_err(|e| NodeError::Zenoh {
+        action: "configure the session",
+        reason: e.to_string(),
+    })?;
+    if multicast_scouting {
+        config
+            .insert_json5("scouting/multicast/enabled", "true")
+            .map_err(|e| NodeError::Zenoh {
+                action: "enable multicast scouting",
+                reason: e.to_string(),
+            })?;
+    }
+    Ok(config)
+}
+
+/// The controller a configuration asks for; network controllers load and check their model
+/// (and ONNX Runtime) here, so a missing library or mismatched card fails at start-up.
+///
+/// # Errors
+/// [`NodeError::Config`] for bad controller parameters, [`NodeError::Model`] when the model or
+/// ONNX Runtime cannot be loaded or the model card does not match the configuration.
+pub fn make_controller(config: &AgentConfig) -> Result<Box<dyn Controller>, NodeError> {
+    Ok(match config.controller {
+        ControllerKind::PathTracker => Box::new(PathTracker::new(config.path_tracker)?),
+        ControllerKind::DynamicWindow => Box::new(DynamicWindow::new(config.dynamic_window)?),
+        ControllerKind::Dlm | ControllerKind::Lpe | ControllerKind::None => {
+            let options = IntentionNetOptions {
+                intra_threads: config.intention_net.intra_threads,
+            };
+            Box::new(IntentionNet::from_config(config, &options)?)
+        }
+    })
+}
+
+/// Everything [`run`] needs besides the shutdown signal.
+#[derive(Debug, Clone)]
+pub struct NodeOptions {
+    pub robot_id: RobotId,
+    /// The merged configuration (file + command line); `map` must be set.
+    pub config: AgentConfig,
+    pub zenoh: zenoh::Config,
+}
+
+/// Nanosecond stamps that never go backwards: the wall clock at start plus monotonic time.
+#[derive(Debug, Clone, Copy)]
+struct Clock {
+    start: Instant,
+    start_ns: u64,
+}
+
+impl Clock {
+    fn new() -> Self {
+        let start_ns = SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX));
+        Self {
+            start: Instant::now(),
+            start_ns,
+        }
+    }
+
+    fn stamp_ns(&self, at: Instant) -> u64 {
+        let since = u64::try_from(at.duration_since(self.start).as_nanos()).unwrap_or(u64::MAX);
+        self.start_ns.saturating_add(since)
+    }
+}
+
+/// How many published poses are remembered to age the intentions that answer them (100 s of
+/// scans at 10 Hz: an intention answering an older pose is stale under any sane deadline).
+const POSE_HISTORY: usize = 1000;
+/// Odometry readings kept to find the one taken with a scan.
+const ODOM_HISTORY: usize = 64;
+
+/// What the supervisor decided for one control cycle.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Decision {
+    pub cmd_v_mps: f64,
+    pub cmd_omega_radps: f64,
+    pub state: AgentState,
+    pub stop_reason: Option<StopReason>,
+}
+
+/// The agent's brain without I/O: localization, the newest inputs, the controller and the
+/// safety rules. [`run`] feeds it messages and clock ticks and publishes what it returns.
+pub struct Supervisor {
+    config: AgentConfig,
+    map: MapRef,
+    amcl: Amcl,
+    controller: Box<dyn Controller>,
+    odometry: VecDeque<Odometry>,
+    scan: Option<LaserScan>,
+    camera: Option<CameraFrame>,
+    intention: Option<Intention>,
+    /// (seq, local time) of every published pose still remembered.
+    poses: VecDeque<(u64, Instant)>,
+    pose_seq: u64,
+    cmd_v_mps: f64,
+    cmd_omega_radps: f64,
+    last_control: Option<Instant>,
+    state: AgentState,
+    stop_reason: Option<StopReason>,
+}
+
+impl std::fmt::Debug for Supervisor {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Supervisor")
+            .field("map", &self.map)
+            .field("controller", &self.config.controller)
+            .field("state", &self.state)
+            .field("stop_reason", &self.stop_reason)
+            .finish_non_exhaustive()
+    }
+}
+
+fn approach(current: f64, target: f64, max_delta: f64) -> f64 {
+    current + (target - current).clamp(-max_delta, max_delta)
+}
+
+impl Supervisor {
+    /// Builds the localizer on `grid` (initial pose from the configuration, or global
+    /// localization) around an already made controller.
+    ///
+    /// # Errors
+    /// [`NodeError::Amcl`] when the filter cannot be set up on this map.
+    pub fn new(
+        config: AgentConfig,
+        map: MapRef,
+        grid: &OccupancyGrid,
+        controller: Box<dyn Controller>,
+    ) -> Result<Self, NodeError> {
+        let field = Arc::new(LikelihoodField::new(
+            grid,
+            config.amcl.laser_likelihood_max_dist_m,
+        )?);
+        let mut amcl = Amcl::new(config.amcl.clone(), field)?;
+        match config.localization.initial_pose {
+            Some(pose) => amcl.set_initial_pose(pose, config.localization.initial_covariance())?,
+            None => amcl.global_localization()?,
+        }
+        Ok(Self {
+            config,
+            map,
+            amcl,
+            controller,
+            odometry: VecDeque::with_capacity(ODOM_HISTORY),
+            scan: None,
+            camera: None,
+            intention: None,
+            poses: VecDeque::with_capacity(POSE_HISTORY),
+            pose_seq: 0,
+            cmd_v_mps: 0.0,
+            cmd_omega_radps: 0.0,
+            last_control: None,
+            state: AgentState::Starting,
+            stop_reason: None,
+        })
+    }
+
+    #[must_use]
+    pub fn state(&self) -> AgentState {
+        self.state
+    }
+
+    #[must_use]
+    pub fn stop_reason(&self) -> Option<&StopReason> {
+        self.stop_reason.as_ref()
+    }
+
+    #[must_use]
+    pub fn map(&self) -> &MapRef {
+        &self.map
+    }
+
+    /// The localizer, for diagnostics.
+    #[must_use]
+    pub fn amcl(&self) -> &Amcl {
+        &self.amcl
+    }
+
+    /// Position standard deviation of the current belief (infinite before the first estimate).
+    #[must_use]
+    pub fn position_std_m(&self) -> f64 {
+        self.amcl.estimate().map_or(f64::INFINITY, |e| {
+            PoseEstimate {
+                header: Header::default(),
+                pose: e.pose,
+                covariance: e.covariance,
+                sensor_stamp_ns: 0,
+                map: self.map.clone(),
+            }
+            .position_std_m()
+        })
+    }
+
+    #[must_use]
+    pub fn localized(&self) -> bool {
+        self.position_std_m() <= self.config.safety.max_position_std_m
+    }
+
+    /// Remembers an odometry reading.
+    pub fn on_odometry(&mut self, odom: Odometry) {
+        if self.odometry.len() == ODOM_HISTORY {
+            self.odometry.pop_front();
+        }
+        self.odometry.push_back(odom);
+    }
+
+    pub fn on_camera(&mut self, frame: CameraFrame) {
+        self.camera = Some(frame);
+    }
+
+    /// The odometry reading taken with a sensor stamp: the newest at or before it (the base
+    /// publishes odometry at least as often as scans), else the oldest one known.
+    fn odometry_at(&self, stamp_ns: u64) -> Option<&Odometry> {
+        self.odometry
+            .iter()
+            .rev()
+            .find(|o| o.header.stamp_ns <= stamp_ns)
+            .or_else(|| self.odometry.front())
+    }
+
+    /// Runs AMCL on a scan and returns the pose estimate to publish, stamped `now`; `None` when
+    /// no odometry has arrived yet (the filter needs the motion that goes with the scan).
+    ///
+    /// # Errors
+    /// [`NodeError::Amcl`] for a malformed scan or odometry; the filter is left unchanged.
+    pub fn on_scan(
+        &mut self,
+        scan: LaserScan,
+        now: Instant,
+        stamp_ns: u64,
+    ) -> Result<Option<PoseEstimate>, NodeError> {
+        let Some(odom) = self.odometry_at(scan.header.stamp_ns).cloned() else {
+            self.scan = Some(scan);
+            return Ok(None);
+        };
+        self.amcl.update(&odom, Some(&scan))?;
+        let sensor_stamp_ns = scan.header.stamp_ns;
+        self.scan = Some(scan);
+        let (Some(estimate), Some(pose)) = (self.amcl.estimate(), self.amcl.predict_pose(&odom))
+        else {
+            return Ok(None);
+        };
+        self.pose_seq += 1;
+        if self.poses.len() == POSE_HISTORY {
+            self.poses.pop_front();
+        }
+        self.poses.push_back((self.pose_seq, now));
+        Ok(Some(PoseEstimate {
+            header: Header::new(self.pose_seq, stamp_ns),
+            pose,
+            covariance: estimate.covariance,
+            sensor_stamp_ns,
+            map: self.map.clone(),
+        }))
+    }
+
+    /// Takes an intention if it answers a pose this agent published on this map and is newer
+    /// than the one held; returns why it was refused otherwise.
+    ///
+    /// # Errors
+    /// A reason to log: another map, a pose this agent never published, or an older answer.
+    pub fn on_intention(&mut self, intention: Intention) -> Result<(), String> {
+        if intention.map.name != self.map.name {
+            return Err(format!(
+                "intention for map {} v{}, the agent localizes on {} v{}",
+                intention.map.name, intention.map.version, self.map.name, self.map.version
+            ));
+        }
+        if intention.answers_pose_seq > self.pose_seq || intention.answers_pose_seq == 0 {
+            return Err(format!(
+                "intention answers pose {}, which this agent has not published (latest {})",
+                intention.answers_pose_seq, self.pose_seq
+            ));
+        }
+        if let Some(held) = &self.intention {
+            if held.answers_pose_seq > intention.answers_pose_seq {
+                return Err(format!(
+                    "intention answers pose {}, older than the held one ({})",
+                    intention.answers_pose_seq, held.answers_pose_seq
+                ));
+            }
+        }
+        self.intention = Some(intention);
+        Ok(())
+    }
+
+    /// Age of the held intention: now minus when the pose it answers was published. Poses that
+    /// fell out of the history give the age of the oldest remembered one, a lower bound.
+    fn intention_age(&self, intention: &Intention, now: Instant) -> Duration {
+        let seq = intention.answers_pose_seq;
+        let published = self
+            .poses
+            .iter()
+            .rev()
+            .find(|(s, _)| *s <= seq)
+            .or_else(|| self.poses.front())
+            .map_or(now, |(_, at)| *at);
+        now.saturating_duration_since(published)
+    }
+
+    /// One control cycle at local time `now`.
+    pub fn control(&mut self, now: Instant) -> Decision {
+        let nominal_dt = 1.0 / self.config.control_rate_hz;
+        let dt = self.last_control.map_or(nominal_dt, |t| {
+            now.saturating_duration_since(t)
+                .as_secs_f64()
+                .clamp(1e-3, 2.0 * nominal_dt)
+        });
+        self.last_control = Some(now);
+        let limits = self.config.limits;
+        let (target, state, reason) = self.target(now, dt, &limits);
+        let (v, w) = match target {
+            // Driving: the controller's command within the acceleration limits.
+            Some((v, w)) => (
+                approach(self.cmd_v_mps, v, limits.max_accel_mps2 * dt),
+                approach(self.cmd_omega_radps, w, limits.max_turn_accel_radps2 * dt),
+            ),
+            None => (
+                approach(self.cmd_v_mps, 0.0, self.config.safety.stop_decel_mps2 * dt),
+                approach(self.cmd_omega_radps, 0.0, limits.max_turn_accel_radps2 * dt),
+            ),
+        };
+        let state = match state {
+            AgentState::Stopping | AgentState::Stopped => {
+                if v == 0.0 && w == 0.0 {
+                    AgentState::Stopped
+                } else {
+                    AgentState::Stopping
+                }
+            }
+            other => other,
+        };
+        if self.state == AgentState::Driving && state != AgentState::Driving {
+            // A stop ends the controller's episode; it starts afresh when driving resumes.
+            self.controller.reset();
+        }
+        self.cmd_v_mps = v;
+        self.cmd_omega_radps = w;
+        self.state = state;
+        self.stop_reason.clone_from(&reason);
+        Decision {
+            cmd_v_mps: v,
+            cmd_omega_radps: w,
+            state,
+            stop_reason: reason,
+        }
+    }
+
+    /// The target command (`None`: come to a stop), the state and the stop reason.
+    fn target(
+        &mut self,
+        now: Instant,
+        dt: f64,
+        limits: &Limits,
+    ) -> (Option<(f64, f64)>, AgentState, Option<StopReason>) {
+        let stop = |reason| (None, AgentState::Stopping, Some(reason));
+        let position_std_m = self.position_std_m();
+        if position_std_m > self.config.safety.max_position_std_m {
+            // Not finite only before the first estimate; the status needs a number.
+            let shown = if position_std_m.is_finite() {
+                position_std_m
+            } else {
+                f64::MAX
+            };
+            return stop(StopReason::LocalizationLost {
+                position_std_m: shown,
+            });
+        }
+        let Some(intention) = self.intention.as_ref() else {
+            return stop(StopReason::NoIntention);
+        };
+        let age = self.intention_age(intention, now);
+        if age > Duration::from_millis(self.config.safety.intention_deadline_ms) {
+            return stop(StopReason::StaleIntention {
+                age_ms: u64::try_from(age.as_millis()).unwrap_or(u64::MAX),
+            });
+        }
+        if intention.task_id.is_none() || intention.dlm == Dlm::Stop {
+            // Nothing to do, or the goal is reached: rest, which is not a fault.
+            return (None, AgentState::Idle, None);
+        }
+        let latest = self.odometry.back();
+        let pose = latest
+            .and_then(|o| self.amcl.predict_pose(o))
+            .or_else(|| self.amcl.estimate().map(|e| e.pose))
+            .unwrap_or_else(|| Pose2D::new(0.0, 0.0, 0.0));
+        let input = ControlInput {
+            pose,
+            v_mps: latest.map_or(0.0, |o| o.v_mps),
+            omega_radps: latest.map_or(0.0, |o| o.omega_radps),
+            scan: self.scan.as_ref(),
+            camera: self.camera.as_ref(),
+            intention: Some(intention),
+            limits,
+            dt_s: dt,
+        };
+        match self.controller.control(&input) {
+            Ok(control) => {
+                let (v, w) = Control::clamped(control).to_physical(limits);
+                (Some((v, w)), AgentState::Driving, None)
+            }
+            Err(e) => stop(StopReason::ControllerError {
+                message: e.to_string(),
+            }),
+        }
+    }
+
+    /// The status to publish now.
+    #[must_use]
+    pub fn status(&self, seq: u64, stamp_ns: u64) -> AgentStatus {
+        AgentStatus {
+            header: Header::new(seq, stamp_ns),
+            state: self.state,
+            stop_reason: self.stop_reason.clone(),
+            controller: self.config.controller.status_name().to_string(),
+            map: Some(self.map.clone()),
+            localized: self.localized(),
+        }
+    }
+}
+
+/// Whether two statuses differ in what a listener cares about (the state or the kind of stop
+/// reason; a stale intention's growing age is not a change).
+fn same_condition(
+    a: (AgentState, Option<&StopReason>),
+    b: (AgentState, Option<&StopReason>),
+) -> bool {
+    a.0 == b.0 && a.1.map(std::mem::discriminant) == b.1.map(std::mem::discriminant)
+}
+
+fn grid_of(map: MapGrid) -> Result<(MapRef, OccupancyGrid), NodeError> {
+    let meta = map.meta;
+    let map_ref = meta.map_ref();
+    let grid = OccupancyGrid::new(
+        meta.width_cells,
+        meta.height_cells,
+        meta.resolution_m,
+        meta.origin,
+        map.cells,
+    )
+    .map_err(|e| NodeError::Map {
+        name: meta.name.to_string(),
+        reason: e.to_string(),
+    })?;
+    Ok((map_ref, grid))
+}
+
+/// Runs the agent until `shutdown` completes, then commands a stop and leaves the session.
+///
+/// # Errors
+/// [`NodeError`] for an invalid configuration, a model that cannot be loaded, or Zenoh failures
+/// at start-up; messages that fail to decode at run time are logged and skipped.
+pub async fn run(
+    options: NodeOptions,
+    shutdown: impl Future<Output = ()>,
+) -> Result<(), NodeError> {
+    let NodeOptions {
+        robot_id,
+        config,
+        zenoh,
+    } = options;
+    config.validate()?;
+    let map_name = config.map.clone().ok_or(ConfigError::Invalid {
+        field: "map",
+        value: "(none)".into(),
+        reason: "give --map or `map` in the configuration",
+    })?;
+    // Before the session: a missing ONNX Runtime or a wrong model is a start-up error.
+    let controller = make_controller(&config)?;
+    let session = zenoh::open(zenoh)
+        .await
+        .map_err(zenoh_err("open the session"))?;
+    let result = run_in_session(&session, &robot_id, &map_name, config, controller, shutdown).await;
+    if let Err(e) = session.close().await {
+        tracing::warn!("closing the zenoh session: {e}");
+    }
+    result
+}
+
+async fn run_in_session(
+    session: &Session,
+    robot_id: &RobotId,
+    map_name: &protocol::MapName,
+    config: AgentConfig,
+    controller: Box<dyn Controller>,
+    shutdown: impl Future<Output = ()>,
+) -> Result<(), NodeError> {
+    let site = config.site.clone();
+    let key = |topic| keys::robot(&site, robot_id, topic);
+    let clock = Clock::new();
+    let token = session
+        .liveliness()
+        .declare_token(key(RobotTopic::Alive))
+        .await
+        .map_err(zenoh_err("declare the liveliness token"))?;
+    let pose_pub = session
+        .declare_publisher(key(RobotTopic::Pose))
+        .await
+        .map_err(zenoh_err("declare the pose publisher"))?;
+    let status_pub = session
+        .declare_publisher(key(RobotTopic::Status))
+        .await
+        .map_err(zenoh_err("declare the status publisher"))?;
+    let cmd_pub = session
+        .declare_publisher(key(RobotTopic::CmdVel))
+        .await
+        .map_err(zenoh_err("declare the cmd_vel publisher"))?;
+    // Ring channels keep the newest samples: a slow cycle skips old data instead of queueing it.
+    let odom_sub = session
+        .declare_subscriber(key(RobotTopic::Odom))
+        .with(RingChannel::new(ODOM_HISTORY))
+        .await
+        .map_err(zenoh_err("subscribe odom"))?;
+    let scan_sub = session
+        .declare_subscriber(key(RobotTopic::Scan))
+        .with(RingChannel::new(4))
+        .await
+        .map_err(zenoh_err("subscribe scan"))?;
+    let camera_sub = session
+        .declare_subscriber(key(RobotTopic::Camera))
+        .with(RingChannel::new(1))
+        .await
+        .map_err(zenoh_err("subscribe camera"))?;
+    let intention_sub = session
+        .declare_subscriber(key(RobotTopic::Intention))
+        .with(RingChannel::new(4))
+        .await
+        .map_err(zenoh_err("subscribe intention"))?;
+
+    let mut status_seq = 0u64;
+    let starting = AgentStatus {
+        header: Header::new(status_seq, clock.stamp_ns(Instant::now())),
+        state: AgentState::Starting,
+        stop_reason: None,
+        controller: config.controller.status_name().to_string(),
+        map: None,
+        localized: false,
+    };
+    protocol::zenoh_io::publish(&status_pub, &starting).await?;
+    tracing::info!(robot = %robot_id, site = %site, map = %map_name, controller = %config.controller, "agent starting");
+
+    tokio::pin!(shutdown);
+    let fetch_timeout = Duration::from_millis(config.map_fetch_timeout_ms);
+    let mut backoff = Duration::from_millis(100);
+    let map = loop {
+        let fetch =
+            map_store::fetch_map(session, &site, map_name, config.map_version, fetch_timeout);
+        tokio::select! {
+            () = &mut shutdown => {
+                tracing::info!("shutdown before the map arrived");
+                token.undeclare().await.map_err(zenoh_err("undeclare the liveliness token"))?;
+                return Ok(());
+            }
+            answer = fetch => match answer {
+                Ok(map) => break map,
+                Err(e) => {
+                    tracing::warn!(map = %map_name, "map store did not deliver the map ({e}); retrying in {backoff:?}");
+                }
+            }
+        }
+        tokio::select! {
+            () = &mut shutdown => {
+                token.undeclare().await.map_err(zenoh_err("undeclare the liveliness token"))?;
+                return Ok(());
+            }
+            () = tokio::time::sleep(backoff) => {}
+        }
+        backoff = (backoff * 2).min(Duration::from_secs(5));
+    };
+    let (map_ref, grid) = grid_of(map)?;
+    tracing::info!(map = %map_ref.name, version = map_ref.version, "map received");
+    let mut agent = Supervisor::new(config.clone(), map_ref, &grid, controller)?;
+    drop(grid);
+
+    let mut control_tick =
+        tokio::time::interval(Duration::from_secs_f64(1.0 / config.control_rate_hz));
+    control_tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let mut status_tick =
+        tokio::time::interval(Duration::from_secs_f64(1.0 / config.status_rate_hz));
+    status_tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let mut cmd_seq = 0u64;
+    let mut published: (AgentState, Option<StopReason>) = (AgentState::Starting, None);
+
+    loop {
+        tokio::select! {
+            () = &mut shutdown => break,
+            sample = odom_sub.recv_async() => {
+                let sample = sample.map_err(zenoh_err("receive odom"))?;
+                match protocol::decode_sample::<Odometry>(&sample) {
+                    Ok(odom) => agent.on_odometry(odom),
+                    Err(e) => tracing::warn!("ignoring odom: {e}"),
+                }
+            }
+            sample = scan_sub.recv_async() => {
+                let sample = sample.map_err(zenoh_err("receive scan"))?;
+                let scan = match protocol::decode_sample::<LaserScan>(&sample) {
+                    Ok(scan) => scan,
+                    Err(e) => {
+                        tracing::warn!("ignoring scan: {e}");
+                        continue;
+                    }
+                };
+                let now = Instant::now();
+                match agent.on_scan(scan, now, clock.stamp_ns(now)) {
+                    Ok(Some(pose)) => protocol::zenoh_io::publish(&pose_pub, &pose).await?,
+                    Ok(None) => tracing::debug!("scan before any odometry: no pose yet"),
+                    Err(e) => tracing::warn!("scan not used for localization: {e}"),
+                }
+            }
+            sample = camera_sub.recv_async() => {
+                let sample = sample.map_err(zenoh_err("receive camera"))?;
+                match protocol::decode_sample::<CameraFrame>(&sample) {
+                    Ok(frame) => agent.on_camera(frame),
+                    Err(e) => tracing::warn!("ignoring camera frame: {e}"),
+                }
+            }
+            sample = intention_sub.recv_async() => {
+                let sample = sample.map_err(zenoh_err("receive intention"))?;
+                match protocol::decode_sample::<Intention>(&sample) {
+                    Ok(intention) => {
+                        if let Err(why) = agent.on_intention(intention) {
+                            tracing::debug!("intention ignored: {why}");
+                        }
+                    }
+                    Err(e) => tracing::warn!("ignoring intention: {e}"),
+                }
+            }
+            _ = control_tick.tick() => {
+                let now = Instant::now();
+                let decision = agent.control(now);
+                cmd_seq += 1;
+                let cmd = CmdVel {
+                    header: Header::new(cmd_seq, clock.stamp_ns(now)),
+                    v_mps: decision.cmd_v_mps,
+                    omega_radps: decision.cmd_omega_radps,
+                };
+                protocol::zenoh_io::publish(&cmd_pub, &cmd).await?;
+                if !same_condition(
+                    (published.0, published.1.as_ref()),
+                    (decision.state, decision.stop_reason.as_ref()),
+                ) {
+                    match &decision.stop_reason {
+                        Some(reason) => tracing::info!(state = ?decision.state, "{reason}"),
+                        None => tracing::info!(state = ?decision.state, "state changed"),
+                    }
+                    status_seq += 1;
+                    protocol::zenoh_io::publish(&status_pub, &agent.status(status_seq, clock.stamp_ns(now))).await?;
+                    published = (decision.state, decision.stop_reason);
+                }
+            }
+            _ = status_tick.tick() => {
+                status_seq += 1;
+                let status = agent.status(status_seq, clock.stamp_ns(Instant::now()));
+                protocol::zenoh_io::publish(&status_pub, &status).await?;
+            }
+        }
+    }
+
+    // Leave the base standing still rather than waiting for its command timeout.
+    let now = Instant::now();
+    let stop = CmdVel {
+        header: Header::new(cmd_seq + 1, clock.stamp_ns(now)),
+        v_mps: 0.0,
+        omega_radps: 0.0,
+    };
+    protocol::zenoh_io::publish(&cmd_pub, &stop).await?;
+    let mut last = agent.status(status_seq + 1, clock.stamp_ns(now));
+    last.state = AgentState::Stopped;
+    last.stop_reason = Some(StopReason::Commanded);
+    protocol::zenoh_io::publish(&status_pub, &last).await?;
+    token
+        .undeclare()
+        .await
+        .map_err(zenoh_err("undeclare the liveliness token"))?;
+    tracing::info!(robot = %robot_id, "agent stopped");
+    Ok(())
+}
