@@ -203,16 +203,24 @@ pub async fn run_fleet_bench(
             .map_err(setup)?;
         subs.push(sub);
     }
-    // Every robot reports once so the service knows it before it gets a task.
-    for (i, r) in robots.iter_mut().enumerate() {
-        publish_pose(&client, &site, r, &map_ref, i, &received).await?;
-    }
+    // Every robot reports until the service knows it (the first puts may leave before the
+    // service's subscription has reached this session).
     let deadline = Instant::now() + Duration::from_secs(30);
-    while fleet.robots().len() < opts.robots {
+    loop {
+        let known: std::collections::HashSet<RobotId> =
+            fleet.robots().into_iter().map(|r| r.id).collect();
+        if known.len() >= opts.robots {
+            break;
+        }
         if Instant::now() > deadline {
             return Err(setup("the service did not see every robot within 30 s"));
         }
-        tokio::time::sleep(Duration::from_millis(20)).await;
+        for (i, r) in robots.iter_mut().enumerate() {
+            if !known.contains(&r.id) {
+                publish_pose(&client, &site, r, &map_ref, i, &received).await?;
+            }
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
     }
     lock(&received).latencies_ms.clear();
     lock(&received).count = 0;

@@ -250,6 +250,9 @@ pub struct Fleet {
     planning_maps: Mutex<HashMap<(MapName, u32), Arc<PlanningMap>>>,
     /// Serializes task transitions and robot assignment (always taken before `robots`).
     task_lock: Mutex<()>,
+    /// Every unfinished task as stored: the replanning loop reads it here, not from the
+    /// database, and a change is written through (under `task_lock`, the only writer).
+    live_tasks: Mutex<HashMap<TaskId, Task>>,
     events: broadcast::Sender<FleetEvent>,
     metrics: FleetMetrics,
     shutdown: watch::Sender<bool>,
@@ -309,6 +312,7 @@ impl Fleet {
             robots: Mutex::new(HashMap::new()),
             planning_maps: Mutex::new(HashMap::new()),
             task_lock: Mutex::new(()),
+            live_tasks: Mutex::new(HashMap::new()),
             events,
             metrics: FleetMetrics::default(),
             shutdown,
@@ -331,6 +335,7 @@ impl Fleet {
         let now = Instant::now();
         let mut robots = lock(&self.robots);
         for task in self.tasks.unfinished()? {
+            lock(&self.live_tasks).insert(task.id.clone(), task.clone());
             if let Some(robot_id) = task.state.robot_id() {
                 let robot = self.robot_entry(&mut robots, robot_id);
                 robot.task = Some(task.id.clone());
@@ -568,6 +573,7 @@ impl Fleet {
                 state,
                 now_ns(),
             )?;
+            lock(&self.live_tasks).insert(task.id.clone(), task.clone());
             if let Some(r) = &req.robot_id {
                 if let Some(robot) = lock(&self.robots).get_mut(r) {
                     robot.task = Some(task.id.clone());
@@ -712,32 +718,59 @@ impl Fleet {
 
     /// Changes a task's state in the store (the caller holds `task_lock`), then counts,
     /// publishes and streams the change. `decide` returns the new state, `None` for no change.
+    /// An unfinished task is decided on its cached copy, so "no change" (the common case in
+    /// the replanning loop) costs no database transaction.
     fn set_state(
         &self,
         id: &TaskId,
         decide: impl FnOnce(&mut Task) -> Result<Option<TaskState>, FleetError>,
     ) -> Result<Task, FleetError> {
-        let mut before = None;
-        let (task, changed) = self
-            .tasks
-            .update::<FleetError>(id, |t| {
-                before = Some(t.kind());
-                match decide(t)? {
-                    Some(state) if state != t.state => {
-                        t.set_state(state, now_ns());
-                        Ok(true)
+        let cached = lock(&self.live_tasks).get(id).cloned();
+        let (task, changed, before) = match cached {
+            Some(current) => {
+                let mut next = current.clone();
+                match decide(&mut next)? {
+                    Some(state) if state != next.state => {
+                        next.set_state(state, now_ns());
+                        let written = next.clone();
+                        let (task, _) = self
+                            .tasks
+                            .update::<FleetError>(id, move |t| {
+                                *t = written;
+                                Ok(true)
+                            })
+                            .map_err(|e| not_found_task(e, id))?;
+                        (task, true, Some(current.kind()))
                     }
-                    _ => Ok(false),
+                    _ => (current, false, None),
                 }
-            })
-            .map_err(|e| match e {
-                FleetError::Store(StoreError::NotFound(_)) => FleetError::NotFound {
-                    what: "task",
-                    id: id.to_string(),
-                },
-                other => other,
-            })?;
+            }
+            None => {
+                let mut before = None;
+                let (task, changed) = self
+                    .tasks
+                    .update::<FleetError>(id, |t| {
+                        before = Some(t.kind());
+                        match decide(t)? {
+                            Some(state) if state != t.state => {
+                                t.set_state(state, now_ns());
+                                Ok(true)
+                            }
+                            _ => Ok(false),
+                        }
+                    })
+                    .map_err(|e| not_found_task(e, id))?;
+                (task, changed, before)
+            }
+        };
         if changed {
+            let mut live = lock(&self.live_tasks);
+            if task.state.is_terminal() {
+                live.remove(id);
+            } else {
+                live.insert(id.clone(), task.clone());
+            }
+            drop(live);
             self.metrics.task_moved(before, task.kind());
             self.announce(&task);
         }
@@ -848,6 +881,10 @@ impl Fleet {
     }
 
     fn robot_event_due(&self, robot: &mut Robot, now: Instant) -> Option<RobotView> {
+        // A view clones the robot's path: not worth it when nobody watches.
+        if self.events.receiver_count() == 0 {
+            return None;
+        }
         let interval = Duration::from_millis(self.config.fleet.robot_event_interval_ms);
         if robot
             .last_event
@@ -1176,16 +1213,11 @@ impl Fleet {
             robot.paused_since = None;
             robot.task.clone()?
         };
-        let task = match self.tasks.get(&task_id) {
-            Ok(Some(t)) if !t.state.is_terminal() => t,
-            Ok(_) => {
-                self.release_robot(id, &task_id);
-                return None;
-            }
-            Err(e) => {
-                tracing::error!(task = %task_id, "cannot read task: {e}");
-                return None;
-            }
+        let cached = lock(&self.live_tasks).get(&task_id).cloned();
+        let Some(task) = cached else {
+            // Ended (cancelled, failed) since the robot took it.
+            self.release_robot(id, &task_id);
+            return None;
         };
         if pose.map.name != task.map {
             tracing::warn!(robot = %id, task = %task_id, "robot localizes on {}, task is on {}", pose.map.name, task.map);
@@ -1316,7 +1348,7 @@ impl Fleet {
     fn goal_is_free(&self, id: &RobotId, goal_index: u32) -> bool {
         let task_id = lock(&self.robots).get(id).and_then(|r| r.task.clone());
         task_id
-            .and_then(|t| self.tasks.get(&t).ok().flatten())
+            .and_then(|t| lock(&self.live_tasks).get(&t).cloned())
             .and_then(|t| t.goals.get(goal_index as usize).copied())
             .is_some_and(|g| g.yaw_rad.is_none())
     }
@@ -1345,6 +1377,16 @@ impl Fleet {
                 None
             }
         }
+    }
+}
+
+fn not_found_task(e: FleetError, id: &TaskId) -> FleetError {
+    match e {
+        FleetError::Store(StoreError::NotFound(_)) => FleetError::NotFound {
+            what: "task",
+            id: id.to_string(),
+        },
+        other => other,
     }
 }
 

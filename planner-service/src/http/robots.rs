@@ -41,17 +41,37 @@ fn image(content_type: &'static str, bytes: Vec<u8>) -> Response {
         .into_response()
 }
 
+/// Encodes one of a robot's live pictures off the async workers and answers it, or 404
+/// naming `what` when the robot has none yet.
+async fn picture(
+    state: AppState,
+    id: String,
+    content_type: &'static str,
+    what: &'static str,
+    encode: fn(&crate::fleet::Fleet, &RobotId) -> Option<Vec<u8>>,
+) -> Result<Response, ApiError> {
+    let id = RobotId::new(id)?;
+    let fleet = state.fleet.clone();
+    let lookup = id.clone();
+    let bytes = tokio::task::spawn_blocking(move || encode(&fleet, &lookup)).await?;
+    bytes
+        .map(|b| image(content_type, b))
+        .ok_or_else(|| ApiError::not_found(format!("no {what} of robot {id}")))
+}
+
 /// `GET /api/v1/robots/{id}/lpe.png`.
 pub async fn lpe_png(
     State(state): State<AppState>,
     UrlPath(id): UrlPath<String>,
 ) -> Result<Response, ApiError> {
-    let id = RobotId::new(id)?;
-    let fleet = state.fleet.clone();
-    let lookup = id.clone();
-    let png = tokio::task::spawn_blocking(move || fleet.robot_lpe_png(&lookup)).await?;
-    png.map(|b| image("image/png", b))
-        .ok_or_else(|| ApiError::not_found(format!("no LPE image of robot {id}")))
+    picture(
+        state,
+        id,
+        "image/png",
+        "LPE image",
+        crate::fleet::Fleet::robot_lpe_png,
+    )
+    .await
 }
 
 /// `GET /api/v1/robots/{id}/camera.jpg`.
@@ -59,10 +79,12 @@ pub async fn camera_jpg(
     State(state): State<AppState>,
     UrlPath(id): UrlPath<String>,
 ) -> Result<Response, ApiError> {
-    let id = RobotId::new(id)?;
-    let fleet = state.fleet.clone();
-    let lookup = id.clone();
-    let jpeg = tokio::task::spawn_blocking(move || fleet.robot_camera_jpeg(&lookup)).await?;
-    jpeg.map(|b| image("image/jpeg", b))
-        .ok_or_else(|| ApiError::not_found(format!("no camera frame of robot {id}")))
+    picture(
+        state,
+        id,
+        "image/jpeg",
+        "camera frame",
+        crate::fleet::Fleet::robot_camera_jpeg,
+    )
+    .await
 }

@@ -40,7 +40,9 @@ pub struct PlannerConfig {
     pub heuristic_weight: f64,
     /// Downsampling factor of the obstacle heuristic's 2-D grid relative to the map.
     pub heuristic_downsample: u32,
-    /// Obstacle heuristics (one per goal) kept per map version.
+    /// Obstacle heuristics (one per goal) kept per map version. Every robot driving to its own
+    /// goal needs one, so this should exceed the robots on a map: with fewer, each replan
+    /// rebuilds its heuristic (about 1.3 MB each on a 100 m x 100 m map at 5 cm).
     pub heuristic_cache_size: usize,
     /// Try an analytic (Dubins) shot to the goal every this many expansions.
     pub analytic_expansion_every: u32,
@@ -77,7 +79,7 @@ impl Default for PlannerConfig {
             turn_cost_factor: 1.05,
             heuristic_weight: 1.3,
             heuristic_downsample: 4,
-            heuristic_cache_size: 16,
+            heuristic_cache_size: 128,
             analytic_expansion_every: 8,
             analytic_near_goal_m: 4.0,
             goal_position_tolerance_m: 0.1,
