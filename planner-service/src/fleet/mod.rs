@@ -72,6 +72,9 @@ pub struct FleetConfig {
     pub event_buffer: usize,
     /// Most goals one task may have.
     pub max_goals: usize,
+    /// Spacing of the path sent in an intention (the planner's own is finer); turns in place
+    /// are kept whatever the spacing.
+    pub intention_path_spacing_m: f64,
 }
 
 impl Default for FleetConfig {
@@ -87,6 +90,7 @@ impl Default for FleetConfig {
             robot_event_interval_ms: 100,
             event_buffer: 1024,
             max_goals: 64,
+            intention_path_spacing_m: 0.2,
         }
     }
 }
@@ -97,6 +101,12 @@ impl FleetConfig {
     /// # Errors
     /// A sentence naming the field and value.
     pub fn validate(&self) -> Result<(), String> {
+        if !(self.intention_path_spacing_m.is_finite() && self.intention_path_spacing_m >= 0.0) {
+            return Err(format!(
+                "fleet.intention_path_spacing_m = {}: must be zero or positive",
+                self.intention_path_spacing_m
+            ));
+        }
         if !(self.goal_tolerance_m.is_finite() && self.goal_tolerance_m > 0.0) {
             return Err(format!(
                 "fleet.goal_tolerance_m = {}: must be positive",
@@ -1173,7 +1183,7 @@ impl Fleet {
                     answers_pose_seq: pose.header.seq,
                     answers_pose_stamp_ns: pose.header.stamp_ns,
                     map: pose.map.clone(),
-                    path,
+                    path: thin_path(&path, self.config.fleet.intention_path_spacing_m),
                     dlm,
                     lpe: lpe_image,
                 };
@@ -1364,7 +1374,10 @@ impl Fleet {
         let trail: Vec<Pose2D> = {
             let robots = lock(&self.robots);
             let r = robots.get(id)?;
-            let due = r.wants_lpe() || r.lpe_at.is_none_or(|t| t.elapsed() >= interval);
+            // Previews are for the dashboard: none while nobody watches the event stream.
+            let preview_due = self.events.receiver_count() > 0
+                && r.lpe_at.is_none_or(|t| t.elapsed() >= interval);
+            let due = r.wants_lpe() || preview_due;
             if !due {
                 return None;
             }
@@ -1378,6 +1391,30 @@ impl Fleet {
             }
         }
     }
+}
+
+/// Keeps the first and last pose and every pose at least `spacing_m` from the last kept one or
+/// turned by more than 0.2 rad from it (turns in place); `spacing_m` 0 keeps everything.
+fn thin_path(path: &[Pose2D], spacing_m: f64) -> Vec<Pose2D> {
+    const TURN_RAD: f64 = 0.2;
+    let (Some(first), Some(last)) = (path.first(), path.last()) else {
+        return Vec::new();
+    };
+    if spacing_m <= 0.0 || path.len() <= 2 {
+        return path.to_vec();
+    }
+    let mut out = vec![*first];
+    let mut kept = *first;
+    for p in &path[1..path.len() - 1] {
+        let turned = protocol::normalize_angle(p.yaw_rad - kept.yaw_rad).abs();
+        // The tolerance keeps a pose exactly one spacing away despite rounding.
+        if p.distance_m(&kept) >= spacing_m - 1e-9 || turned >= TURN_RAD {
+            out.push(*p);
+            kept = *p;
+        }
+    }
+    out.push(*last);
+    out
 }
 
 fn not_found_task(e: FleetError, id: &TaskId) -> FleetError {
@@ -1485,5 +1522,35 @@ fn to_jpeg(img: &Image) -> Result<Vec<u8>, String> {
                 .map_err(|e| e.to_string())?;
             Ok(out.into_inner())
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn thinning_keeps_ends_spacing_and_turns_in_place() {
+        let mut path: Vec<Pose2D> = (0..=40)
+            .map(|i| Pose2D::new(f64::from(i) * 0.05, 0.0, 0.0))
+            .collect();
+        // A quarter turn in place at the end of the straight part.
+        for k in 1..=5 {
+            path.push(Pose2D::new(
+                2.0,
+                0.0,
+                f64::from(k) * std::f64::consts::FRAC_PI_2 / 5.0,
+            ));
+        }
+        path.push(Pose2D::new(2.0, 0.05, std::f64::consts::FRAC_PI_2));
+        let thin = thin_path(&path, 0.2);
+        assert_eq!(thin.first(), path.first());
+        assert_eq!(thin.last(), path.last());
+        let straight = thin.iter().filter(|p| p.yaw_rad == 0.0).count();
+        assert_eq!(straight, 11, "0 to 2 m every 0.2 m: {thin:?}");
+        let turning = thin.iter().filter(|p| p.yaw_rad > 0.0).count();
+        assert!(turning >= 5, "the turn in place survives: {thin:?}");
+        assert_eq!(thin_path(&path, 0.0), path);
+        assert!(thin_path(&[], 0.2).is_empty());
     }
 }
