@@ -451,16 +451,10 @@ impl Fleet {
         &self.metrics
     }
 
-    /// A receiver of every event from now on.
-    #[must_use]
-    pub fn subscribe_events(&self) -> broadcast::Receiver<FleetEvent> {
-        self.events.subscribe()
-    }
-
-    /// Alias of [`Self::subscribe_events`] (the name the HTTP layer uses).
+    /// A receiver of every event from now on (the dashboard's live stream).
     #[must_use]
     pub fn subscribe(&self) -> broadcast::Receiver<FleetEvent> {
-        self.subscribe_events()
+        self.events.subscribe()
     }
 
     // ----- queries -------------------------------------------------------------------------
