@@ -388,6 +388,10 @@ function upsertRobot(robot) {
 }
 
 function upsertTask(task) {
+  // The POST answer and the event stream race: an older copy (e.g. 'assigned' arriving after
+  // the stream already said 'active') must not overwrite a newer one.
+  const known = state.tasks.get(task.id);
+  if (known && (known.updated_ns ?? 0) > (task.updated_ns ?? 0)) return;
   state.tasks.set(task.id, task);
 }
 

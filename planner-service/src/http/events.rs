@@ -3,7 +3,8 @@
 //! The subscription to the fleet's event bus is taken before the snapshot is read, so no
 //! change falls between the two (a change may show in both, which is harmless: events carry
 //! whole objects). A subscriber that falls behind the bus's buffer skips what it missed and
-//! goes on with the next events; the stream ends when the server shuts down.
+//! gets a fresh `snapshot` instead, so a task change is never lost to a slow client; the
+//! stream ends when the server shuts down.
 
 use std::convert::Infallible;
 use std::time::Duration;
@@ -38,35 +39,49 @@ fn json_event(name: &str, data: &impl Serialize) -> Event {
         })
 }
 
-/// `GET /api/v1/events`.
-pub async fn events(
-    State(state): State<AppState>,
-) -> Result<Sse<impl Stream<Item = Result<Event, Infallible>>>, ApiError> {
-    let rx = state.fleet.subscribe();
-    let fleet = state.fleet.clone();
-    let snapshot = tokio::task::spawn_blocking(move || {
+/// The robots and the newest tasks, read off the async workers (the task list is a database
+/// read).
+async fn snapshot(fleet: std::sync::Arc<crate::fleet::Fleet>) -> Result<Snapshot, ApiError> {
+    tokio::task::spawn_blocking(move || {
         Ok::<_, ApiError>(Snapshot {
             robots: fleet.robots(),
             // The newest tasks, whatever their state: active ones and recent history.
             tasks: fleet.tasks(&TaskFilter::default())?,
         })
     })
-    .await??;
-    let first = stream::once(async move { json_event("snapshot", &snapshot) });
+    .await?
+}
+
+/// `GET /api/v1/events`.
+pub async fn events(
+    State(state): State<AppState>,
+) -> Result<Sse<impl Stream<Item = Result<Event, Infallible>>>, ApiError> {
+    let rx = state.fleet.subscribe();
+    let first_snapshot = snapshot(state.fleet.clone()).await?;
+    let first = stream::once(async move { json_event("snapshot", &first_snapshot) });
     let shutdown = state.shutdown.clone();
+    let fleet = state.fleet.clone();
     let live = stream::unfold(rx, move |mut rx| {
         let mut shutdown = shutdown.clone();
+        let fleet = fleet.clone();
         async move {
             loop {
-                tokio::select! {
+                // Decided first, handled after: the shutdown wait must not live across the
+                // snapshot's await.
+                let received = tokio::select! {
                     _ = shutdown.wait_for(|stop| *stop) => return None,
-                    r = rx.recv() => match r {
-                        Ok(ev) => return Some((json_event(ev.event_name(), &ev), rx)),
-                        Err(RecvError::Lagged(n)) => {
-                            tracing::debug!(skipped = n, "slow event-stream client skipped events");
+                    r = rx.recv() => r,
+                };
+                match received {
+                    Ok(ev) => return Some((json_event(ev.event_name(), &ev), rx)),
+                    Err(RecvError::Lagged(n)) => {
+                        tracing::debug!(skipped = n, "slow event-stream client resynced");
+                        match snapshot(fleet.clone()).await {
+                            Ok(s) => return Some((json_event("snapshot", &s), rx)),
+                            Err(e) => tracing::warn!("cannot resync an event stream: {e:?}"),
                         }
-                        Err(RecvError::Closed) => return None,
-                    },
+                    }
+                    Err(RecvError::Closed) => return None,
                 }
             }
         }
