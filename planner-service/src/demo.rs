@@ -97,7 +97,7 @@ fn bin(dir: &Path, name: &str) -> anyhow::Result<PathBuf> {
         bail!(
             "cannot find {} (build it: cargo build --release -p {})",
             p.display(),
-            if name == "sim" { "sim" } else { name }
+            name
         );
     }
     Ok(p)

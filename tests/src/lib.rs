@@ -131,9 +131,9 @@ impl Proc {
                     .map_while(std::result::Result::ok)
                 {
                     eprintln!("[{label}] {line}");
-                    if tx.send(line).is_err() {
-                        // Keep draining so the child never blocks on a full pipe.
-                    }
+                    // Nobody listening any more is fine: keep draining so the child never
+                    // blocks on a full pipe.
+                    let _ = tx.send(line);
                 }
             });
         }
