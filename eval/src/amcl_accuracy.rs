@@ -21,9 +21,10 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use planner_service::intention::{dlm_from_path, DlmParams};
-use planner_service::planning::{Planner, PlannerConfig, PlanningMap};
-use protocol::{normalize_angle, Header, Intention, MapName, MapRef, Pose2D, TaskId};
+use planning::{
+    stop_intention, Answer, Goal, GoalProgress, IntentionConfig, IntentionPlanner, PlanningMap,
+};
+use protocol::{normalize_angle, Header, Intention, MapName, MapRef, Pose2D, PoseEstimate, TaskId};
 use robot_agent::amcl::{Amcl, LikelihoodField};
 use robot_agent::controllers::{ControlInput, Controller, DynamicWindow, PathTracker};
 use robot_agent::{AgentConfig, ControllerKind};
@@ -65,7 +66,7 @@ pub struct AccuracyOptions {
     pub controller: ControllerKind,
     /// Control cycle (10 Hz like the agent).
     pub dt_s: f64,
-    /// Replan from the AMCL pose every this many cycles.
+    /// Replan from the AMCL pose every this many cycles (1: every cycle, as the service does).
     pub replan_every: u32,
     /// Stop after this much simulated time (default: the scenario's time limit).
     pub max_sim_s: Option<f64>,
@@ -89,7 +90,7 @@ impl Default for AccuracyOptions {
             seed: 0,
             controller: ControllerKind::DynamicWindow,
             dt_s: 0.1,
-            replan_every: 5,
+            replan_every: 1,
             max_sim_s: None,
             max_goals: None,
             goal_timeout_s: 120.0,
@@ -183,15 +184,20 @@ pub fn run_task(
     })?;
     scenario.seed ^= options.seed;
     let plan_path = scenario.floor_plan_path(scenario_path);
-    let plan = map_store::load_ros_map(&plan_path, &map_store::ImportLimits::default())
+    let plan = map_core::load_ros_map(&plan_path, &map_core::ImportLimits::default())
         .map_err(|e| AccuracyError::Scenario {
             path: plan_path.display().to_string(),
             reason: e.to_string(),
         })?
         .grid;
     let task = scenario.name.clone();
-    let goals: Vec<(f64, f64)> = scenario.goals.iter().map(|g| (g.x_m, g.y_m)).collect();
-    let goals_total = options.max_goals.unwrap_or(goals.len()).min(goals.len());
+    let mut goals: Vec<Goal> = scenario
+        .goals
+        .iter()
+        .map(|g| Goal::at(g.x_m, g.y_m))
+        .collect();
+    goals.truncate(options.max_goals.unwrap_or(goals.len()));
+    let goals_total = goals.len();
     let max_sim_s = options.max_sim_s.unwrap_or(scenario.time_limit_s);
     let mut world = World::new(scenario, plan.clone(), SimConfig::default())
         .map_err(|e| setup("world")(e.to_string()))?;
@@ -212,12 +218,14 @@ pub fn run_task(
     // The robot is placed where the scenario says, and told so (as an operator would).
     amcl.set_initial_pose(start, agent.localization.initial_covariance())
         .map_err(|e| setup("initial pose")(e.to_string()))?;
+    // The service's own intention pipeline with its default configuration.
+    let intention_config = IntentionConfig::default();
     let planning = Arc::new(
-        PlanningMap::new(plan, &PlannerConfig::default())
+        PlanningMap::new(plan, &intention_config.planner)
             .map_err(|e| setup("planning map")(e.to_string()))?,
     );
-    let mut planner = Planner::new(planning, PlannerConfig::default())
-        .map_err(|e| setup("planner")(e.to_string()))?;
+    let mut pipeline = IntentionPlanner::new(planning, intention_config)
+        .map_err(|e| setup("intention pipeline")(e.to_string()))?;
     let mut controller: Box<dyn Controller> = match options.controller {
         ControllerKind::PathTracker => Box::new(
             PathTracker::new(agent.path_tracker).map_err(|e| setup("controller")(e.to_string()))?,
@@ -239,10 +247,9 @@ pub fn run_task(
         version: 1,
     };
     let task_id = TaskId::new(task.clone()).ok();
-    let dlm_params = DlmParams::default();
 
     let mut cmd = Command::default();
-    let mut path: Vec<Pose2D> = Vec::new();
+    let mut intention: Option<Intention> = None;
     let (mut goal_index, mut goals_reached) = (0usize, 0usize);
     let mut goal_started_s = 0.0;
     let (mut sum_pos, mut max_pos, mut sum_yaw, mut max_yaw) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
@@ -297,7 +304,8 @@ pub fn run_task(
         }
         let collided = !o.collisions.is_empty();
         if collided || t_s - progress_s > options.stuck_timeout_s {
-            match put_down_pose(&world, &path, truth, options.intervention_ahead_m) {
+            let path = intention.as_ref().map_or(&[][..], |i| i.path.as_slice());
+            match put_down_pose(&world, path, truth, options.intervention_ahead_m) {
                 Some(put) => {
                     world
                         .carry_robot(0, put)
@@ -308,7 +316,8 @@ pub fn run_task(
                     tracing::debug!(task = %task, t_s, ?truth, ?put, collided, "intervention");
                     last_truth = put;
                     (progress_at, progress_s) = (put, t_s);
-                    path.clear();
+                    intention = None;
+                    pipeline.clear_trail();
                     cmd = Command::default();
                     controller.reset();
                     progress(t_s, max_sim_s, goals_reached);
@@ -320,49 +329,54 @@ pub fn run_task(
             }
         }
 
-        let goal = goals[goal_index];
-        if (goal.0 - pose.x_m).hypot(goal.1 - pose.y_m) <= dlm_params.stop_distance_m {
-            goals_reached += 1;
-            goal_index += 1;
-            goal_started_s = t_s;
-            path.clear();
-            cmd = Command::default();
-            controller.reset();
-            progress(t_s, max_sim_s, goals_reached);
-            continue;
-        }
         if t_s - goal_started_s > options.goal_timeout_s {
             tracing::warn!(task = %task, goal_index, "goal not reached in {} s; next goal", options.goal_timeout_s);
             goal_index += 1;
             goal_started_s = t_s;
-            path.clear();
+            intention = None;
             cmd = Command::default();
             controller.reset();
             continue;
         }
-        if path.is_empty() || cycles % u64::from(options.replan_every.max(1)) == 0 {
-            let yaw = (goal.1 - pose.y_m).atan2(goal.0 - pose.x_m);
-            match planner.plan(pose, Pose2D::new(goal.0, goal.1, yaw)) {
-                Ok(p) => path = p.poses,
-                // From a pose the plan calls blocked (AMCL error near a wall): keep the old path.
-                Err(e) => tracing::debug!(task = %task, "replan failed: {e}"),
+        if intention.is_none() || cycles % u64::from(options.replan_every.max(1)) == 0 {
+            // What the agent would publish, answered as the service answers it.
+            let estimate = PoseEstimate {
+                header: Header::new(cycles, obs.time_ns),
+                pose,
+                covariance: amcl.estimate().map_or([0.0; 9], |e| e.covariance),
+                sensor_stamp_ns: obs.time_ns,
+                map: map_ref.clone(),
+            };
+            let header = Header::new(cycles, obs.time_ns);
+            match pipeline.answer(&estimate, &GoalProgress::new(&goals, goal_index), false) {
+                Answer::Done => {
+                    goals_reached += goals_total - goal_index;
+                    goal_index = goals_total;
+                    continue;
+                }
+                Answer::Heading {
+                    goal_index: k,
+                    plan,
+                } => {
+                    if k > goal_index {
+                        goals_reached += k - goal_index;
+                        goal_index = k;
+                        goal_started_s = t_s;
+                    }
+                    intention = Some(match plan {
+                        Ok(p) => p.intention(header, &estimate, task_id.clone(), k, false),
+                        Err(e) => {
+                            tracing::debug!(task = %task, "replan failed: {e}");
+                            stop_intention(header, &estimate, task_id.clone(), k)
+                        }
+                    });
+                }
             }
         }
-        if path.is_empty() {
+        let Some(intention) = intention.as_ref() else {
             cmd = Command::default();
             progress(t_s, max_sim_s, goals_reached);
             continue;
-        }
-        let intention = Intention {
-            header: Header::new(cycles, obs.time_ns),
-            task_id: task_id.clone(),
-            goal_index: u32::try_from(goal_index).unwrap_or(u32::MAX),
-            answers_pose_seq: cycles,
-            answers_pose_stamp_ns: obs.time_ns,
-            map: map_ref.clone(),
-            dlm: dlm_from_path(&path, pose, &dlm_params),
-            path: path.clone(),
-            lpe: None,
         };
         let input = ControlInput {
             pose,
@@ -370,7 +384,7 @@ pub fn run_task(
             omega_radps: o.odom.omega_radps,
             scan: Some(&o.scan),
             camera: None,
-            intention: Some(&intention),
+            intention: Some(intention),
             limits: &agent.limits,
             dt_s: options.dt_s,
         };

@@ -1,39 +1,30 @@
-//! Floor plans in, occupancy grids out.
+//! The map store: versioned, durable floor plans and the Zenoh queryable that serves them.
 //!
-//! - [`grid`]: the occupancy grid (ROS cell values, row 0 at the bottom) and its transforms.
-//! - [`distance`]: the exact Euclidean distance field and inflation by a robot radius.
-//! - [`ros`]: import of ROS `map_server` YAML + image with Nav2's exact semantics.
-//! - [`picture`]: import of plain floor-plan pictures given their scale.
+//! The map code itself (grid, distance field, ROS and picture import, export) is `map-core`,
+//! re-exported here so the store's users see one crate.
+//!
 //! - [`import`]: one entry point for any input file, validated before anything is stored.
 //! - [`store`]: durable, versioned, content-addressed storage in an embedded redb database.
-//! - [`export`]: export back to ROS PGM + YAML as Nav2's `map_saver` writes it.
-//! - [`serve`]: the Zenoh queryable serving maps to robots, and the robots' [`fetch_map`].
+//! - [`serve`]: the Zenoh queryable serving maps to robots (the client is `map_core::fetch`).
 //! - [`config`], [`cli`], [`bench`]: the `map-store` binary's configuration, commands and
 //!   benchmark.
 
 pub mod bench;
 pub mod cli;
 pub mod config;
-pub mod distance;
-pub mod error;
-pub mod export;
-pub mod grid;
 pub mod import;
 pub mod paths;
-pub mod picture;
-pub mod ros;
 pub mod serve;
 pub mod store;
 
-pub use config::MapStoreConfig;
-pub use distance::{DistanceField, Sources};
-pub use error::MapError;
-pub use export::{export_ros_map, ExportOptions};
-pub use grid::{
-    classify, CellClass, CellCounts, GridGeometry, OccupancyGrid, FREE, OCCUPIED, UNKNOWN,
+pub use map_core::{
+    classify, export_ros_map, fetch_map, fetch_meta, import_picture, load_ros_map, CellClass,
+    CellCounts, DistanceField, ExportOptions, GridGeometry, ImportLimits, Interpretation, MapError,
+    MapMode, OccupancyGrid, PictureOptions, RosMap, Sources, FREE, OCCUPIED, UNKNOWN,
 };
+pub use map_core::{distance, error, export, fetch, grid, picture, ros};
+
+pub use config::MapStoreConfig;
 pub use import::{import_file, import_into};
-pub use picture::{import_picture, PictureOptions};
-pub use ros::{load_ros_map, ImportLimits, Interpretation, MapMode, RosMap};
-pub use serve::{fetch_map, fetch_meta, MapServer};
+pub use serve::MapServer;
 pub use store::{MapSource, MapStore, SourceKind, StoredMap};

@@ -1,5 +1,5 @@
-//! The Zenoh side of the map store: a queryable that serves stored maps to robots, and the
-//! client a robot uses to fetch one.
+//! The Zenoh side of the map store: a queryable that serves stored maps to robots (the client
+//! a robot uses to fetch one is `map_core::fetch`).
 //!
 //! | query | reply |
 //! |---|---|
@@ -12,18 +12,15 @@
 //! Payloads go through `protocol`'s codec; key expressions come from `protocol::keys`.
 
 use std::sync::Arc;
-use std::time::Duration;
 
 use protocol::zenoh_io;
-use protocol::{keys, MapGrid, MapMeta, MapName, SiteId};
+use protocol::{keys, MapGrid, MapMeta, SiteId};
 use zenoh::query::{Query, Queryable};
 use zenoh::Session;
 
-use crate::error::MapError;
 use crate::store::MapStore;
-
-/// The selector parameter that asks for metadata only.
-pub const META_PARAM: &str = "meta";
+use map_core::fetch::META_PARAM;
+use map_core::MapError;
 
 /// A running map queryable; dropping it undeclares the queryable.
 pub struct MapServer {
@@ -111,91 +108,5 @@ enum Reply {
 async fn reply_error(query: &Query, msg: &str) {
     if let Err(e) = query.reply_err(msg.to_string()).await {
         tracing::warn!(key = %query.key_expr(), error = %e, "cannot send error reply");
-    }
-}
-
-/// Fetches a map (latest when `version` is `None`) from a map store on the network.
-///
-/// # Errors
-/// [`MapError::Remote`] when the store answers with an error (e.g. unknown map),
-/// [`MapError::Zenoh`] when no store answers within `timeout` or the reply does not decode.
-pub async fn fetch_map(
-    session: &Session,
-    site: &SiteId,
-    name: &MapName,
-    version: Option<u32>,
-    timeout: Duration,
-) -> Result<MapGrid, MapError> {
-    let grid: MapGrid = query(session, site, name, version, false, timeout).await?;
-    check_answer(&grid.meta, name, version)?;
-    Ok(grid)
-}
-
-/// Fetches only the metadata of a map (latest when `version` is `None`).
-///
-/// # Errors
-/// As [`fetch_map`].
-pub async fn fetch_meta(
-    session: &Session,
-    site: &SiteId,
-    name: &MapName,
-    version: Option<u32>,
-    timeout: Duration,
-) -> Result<MapMeta, MapError> {
-    let meta: MapMeta = query(session, site, name, version, true, timeout).await?;
-    check_answer(&meta, name, version)?;
-    Ok(meta)
-}
-
-fn check_answer(meta: &MapMeta, name: &MapName, version: Option<u32>) -> Result<(), MapError> {
-    if &meta.name != name || version.is_some_and(|v| v != meta.version) {
-        return Err(MapError::Zenoh {
-            action: "fetch",
-            reason: format!(
-                "asked for {name} version {version:?}, got {} version {}",
-                meta.name, meta.version
-            ),
-        });
-    }
-    Ok(())
-}
-
-async fn query<M: protocol::WireMessage>(
-    session: &Session,
-    site: &SiteId,
-    name: &MapName,
-    version: Option<u32>,
-    meta_only: bool,
-    timeout: Duration,
-) -> Result<M, MapError> {
-    let key = match version {
-        Some(v) => keys::map_version(site, name, v),
-        None => keys::map_latest(site, name),
-    };
-    let params = if meta_only { META_PARAM } else { "" };
-    let replies = session
-        .get((&key, params))
-        .timeout(timeout)
-        .await
-        .map_err(|e| MapError::Zenoh {
-            action: "query",
-            reason: e.to_string(),
-        })?;
-    let reply = replies.recv_async().await.map_err(|_| MapError::Zenoh {
-        action: "fetch",
-        reason: format!(
-            "no map store answered {key} (timeout {} ms)",
-            timeout.as_millis()
-        ),
-    })?;
-    match reply.into_result() {
-        Ok(sample) => zenoh_io::decode_sample::<M>(&sample).map_err(|e| MapError::Zenoh {
-            action: "decode",
-            reason: format!("{key}: {e}"),
-        }),
-        Err(err) => Err(MapError::Remote {
-            key: key.to_string(),
-            reason: String::from_utf8_lossy(&err.payload().to_bytes()).into_owned(),
-        }),
     }
 }

@@ -22,7 +22,7 @@ fn text(b: &[u8]) -> String {
 }
 
 fn nav2(file: &str) -> String {
-    map_store::paths::nav2_maps_dir()
+    test_support::nav2_maps_dir()
         .join(file)
         .display()
         .to_string()

@@ -7,7 +7,7 @@ use map_store::{load_ros_map, DistanceField, ImportLimits, Sources};
 
 #[test]
 fn all_nav2_maps_import() {
-    let dir = map_store::paths::nav2_maps_dir();
+    let dir = test_support::nav2_maps_dir();
     // (map, width, height, resolution)
     let expected = [
         ("100by100_10", 2000, 2000, 0.05),
@@ -43,7 +43,7 @@ fn all_nav2_maps_import() {
 
 #[test]
 fn tb3_sandbox_distance_field_is_zero_on_walls_and_positive_in_free_space() {
-    let dir = map_store::paths::nav2_maps_dir();
+    let dir = test_support::nav2_maps_dir();
     let g = load_ros_map(&dir.join("tb3_sandbox.yaml"), &ImportLimits::default())
         .unwrap()
         .grid;

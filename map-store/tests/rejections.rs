@@ -11,7 +11,7 @@ use map_store::{ImportLimits, MapError, MapStore};
 use protocol::MapName;
 
 fn nav2(file: &str) -> PathBuf {
-    map_store::paths::nav2_maps_dir().join(file)
+    test_support::nav2_maps_dir().join(file)
 }
 
 /// A YAML next to a copy of testmap.pgm, with `body` as its contents.

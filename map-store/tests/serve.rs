@@ -20,7 +20,7 @@ async fn session_pair() -> (zenoh::Session, zenoh::Session) {
 async fn robot_fetches_latest_and_versions_meta_and_gets_named_errors() {
     let dir = tempfile::tempdir().unwrap();
     let store = Arc::new(MapStore::open(dir.path()).unwrap());
-    let yaml = map_store::paths::nav2_maps_dir().join("depot.yaml");
+    let yaml = test_support::nav2_maps_dir().join("depot.yaml");
     let grid = load_ros_map(&yaml, &ImportLimits::default()).unwrap().grid;
     let name = MapName::new("depot").unwrap();
     let src = MapSource::new(SourceKind::RosMap, Some(&yaml), "serve test");

@@ -178,7 +178,7 @@ fn sigkill_and_abort_mid_write_leave_committed_versions_intact() {
 #[test]
 fn everything_survives_a_restart() {
     let dir = tempfile::tempdir().unwrap();
-    let yaml = map_store::paths::nav2_maps_dir().join("depot.yaml");
+    let yaml = test_support::nav2_maps_dir().join("depot.yaml");
     let grid = load_ros_map(&yaml, &ImportLimits::default()).unwrap().grid;
     let name = MapName::new("depot").unwrap();
     let src = MapSource::new(SourceKind::RosMap, Some(&yaml), "restart test");

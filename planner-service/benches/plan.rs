@@ -9,12 +9,12 @@ use std::sync::Arc;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use map_store::{load_ros_map, ImportLimits};
-use planner_service::bench::{pose_along, sample_pairs};
-use planner_service::planning::grid_astar::GridAstar;
-use planner_service::planning::{Planner, PlannerConfig, PlanningMap};
+use planning::grid_astar::GridAstar;
+use planning::sample::{pose_along, sample_pairs};
+use planning::{Planner, PlannerConfig, PlanningMap};
 
 fn plan(c: &mut Criterion) {
-    let path = map_store::paths::nav2_maps_dir().join("100by100_10.yaml");
+    let path = test_support::nav2_maps_dir().join("100by100_10.yaml");
     let ros = load_ros_map(&path, &ImportLimits::default()).expect("map loads");
     let cfg = PlannerConfig::default();
     let map = Arc::new(PlanningMap::new(ros.grid, &cfg).expect("map prepares"));

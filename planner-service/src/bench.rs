@@ -12,12 +12,11 @@ use std::time::Instant;
 
 use indicatif::ProgressBar;
 use map_store::{load_ros_map, ImportLimits};
-use protocol::Pose2D;
-use rand::{Rng, SeedableRng};
 use serde::Serialize;
 
-use crate::planning::grid_astar::GridAstar;
-use crate::planning::{PlanError, Planner, PlannerConfig, PlanningMap};
+use planning::grid_astar::GridAstar;
+use planning::sample::{pose_along, sample_pairs, NoPairs};
+use planning::{PlanError, Planner, PlannerConfig, PlanningMap};
 
 /// What to benchmark.
 #[derive(Debug, Clone)]
@@ -137,69 +136,8 @@ pub enum BenchError {
     },
     #[error(transparent)]
     Plan(#[from] PlanError),
-    #[error("map {path} has fewer than two free cells {min_m} m apart")]
-    NoPairs { path: String, min_m: f64 },
-}
-
-fn sample_pose(map: &PlanningMap, rng: &mut impl Rng) -> Option<Pose2D> {
-    let grid = map.grid();
-    let free = map.free_mask();
-    for _ in 0..100_000 {
-        let cx = rng.gen_range(0..grid.width_cells());
-        let cy = rng.gen_range(0..grid.height_cells());
-        if free[grid.index(cx, cy)] {
-            let (x, y) = grid.cell_to_world(i64::from(cx), i64::from(cy));
-            let yaw = rng.gen_range(-std::f64::consts::PI..std::f64::consts::PI);
-            return Some(Pose2D::new(x, y, yaw));
-        }
-    }
-    None
-}
-
-/// Seeded random start/goal pairs in inflated free space, at least `min_m` apart.
-///
-/// # Errors
-/// [`BenchError::NoPairs`] if the map has no room for them.
-pub fn sample_pairs(
-    map: &PlanningMap,
-    n: usize,
-    seed: u64,
-    min_m: f64,
-    name: &str,
-) -> Result<Vec<(Pose2D, Pose2D)>, BenchError> {
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let none = || BenchError::NoPairs {
-        path: name.to_string(),
-        min_m,
-    };
-    let mut out = Vec::with_capacity(n);
-    let mut starts_left = n.saturating_mul(100).max(1000);
-    while out.len() < n {
-        // A start with no goal far enough away is replaced by another start.
-        starts_left = starts_left.checked_sub(1).ok_or_else(none)?;
-        let s = sample_pose(map, &mut rng).ok_or_else(none)?;
-        for _ in 0..200 {
-            let g = sample_pose(map, &mut rng).ok_or_else(none)?;
-            if g.distance_m(&s) >= min_m {
-                out.push((s, g));
-                break;
-            }
-        }
-    }
-    Ok(out)
-}
-
-/// The pose `offset_m` of driven length along `poses` (the last pose if shorter).
-#[must_use]
-pub fn pose_along(poses: &[Pose2D], offset_m: f64) -> Option<Pose2D> {
-    let mut acc = 0.0;
-    for w in poses.windows(2) {
-        acc += w[0].distance_m(&w[1]);
-        if acc >= offset_m {
-            return Some(w[1]);
-        }
-    }
-    poses.last().copied()
+    #[error(transparent)]
+    NoPairs(#[from] NoPairs),
 }
 
 fn ms(since: Instant) -> f64 {
@@ -378,15 +316,5 @@ mod tests {
         assert_eq!((s.n, s.p50, s.p99, s.max), (100, 50.0, 99.0, 100.0));
         assert!((s.mean - 50.5).abs() < 1e-12);
         assert_eq!(Summary::of(&[]).n, 0);
-    }
-
-    #[test]
-    fn pose_along_walks_the_path() {
-        let poses: Vec<Pose2D> = (0..10)
-            .map(|i| Pose2D::new(f64::from(i) * 0.1, 0.0, 0.0))
-            .collect();
-        let p = pose_along(&poses, 0.5).unwrap();
-        assert!((p.x_m - 0.5).abs() < 1e-9);
-        assert!((pose_along(&poses, 5.0).unwrap().x_m - 0.9).abs() < 1e-9);
     }
 }

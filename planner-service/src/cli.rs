@@ -20,9 +20,9 @@ use crate::bench::{markdown_table, run_bench, BenchOptions};
 use crate::config::ServiceConfig;
 use crate::http::auth::TokenSource;
 use crate::http::{ServeOptions, Server};
-use crate::intention::{dlm_from_path, render_lpe};
-use crate::picture::{render_picture, save_picture};
-use crate::planning::{Planner, PlanningMap};
+use planning::intention::{dlm_from_path, render_lpe};
+use planning::picture::{render_picture, save_picture};
+use planning::{Planner, PlanningMap};
 
 /// Fleet planner: hybrid A* paths and intentions on floor plans.
 #[derive(Debug, Parser)]

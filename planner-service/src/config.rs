@@ -13,8 +13,8 @@ use protocol::SiteId;
 use serde::{Deserialize, Serialize};
 
 use crate::fleet::FleetConfig;
-use crate::intention::{DlmParams, LpeParams};
-use crate::planning::PlannerConfig;
+use planning::intention::{DlmParams, LpeParams};
+use planning::PlannerConfig;
 
 /// The whole configuration file.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -186,6 +186,20 @@ pub enum ConfigError {
 }
 
 impl ServiceConfig {
+    /// The intention pipeline's settings: `[planner]`, `[dlm]`, `[lpe]` and the goal
+    /// tolerance, path spacing and trail length of `[fleet]`.
+    #[must_use]
+    pub fn intention(&self) -> planning::IntentionConfig {
+        planning::IntentionConfig {
+            planner: self.planner.clone(),
+            dlm: self.dlm.clone(),
+            lpe: self.lpe.clone(),
+            goal_tolerance_m: self.fleet.goal_tolerance_m,
+            path_spacing_m: self.fleet.intention_path_spacing_m,
+            trail_poses: self.fleet.trail_poses,
+        }
+    }
+
     /// Parses and validates TOML text; `origin` names it in errors.
     ///
     /// # Errors

@@ -18,10 +18,11 @@ use protocol::keys::{self, RobotTopic};
 use protocol::{Header, Intention, MapName, MapRef, Pose2D, PoseEstimate, RobotId, SiteId};
 use serde::Serialize;
 
-use crate::bench::{pose_along, sample_pairs, Summary};
+use crate::bench::Summary;
 use crate::config::ServiceConfig;
 use crate::fleet::{Fleet, Goal, NewTask};
-use crate::planning::{Planner, PlanningMap};
+use planning::sample::{pose_along, sample_pairs};
+use planning::{Planner, PlanningMap};
 
 /// What to run.
 #[derive(Debug, Clone)]

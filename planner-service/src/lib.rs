@@ -1,8 +1,6 @@
-//! Planner service: hybrid A* replanning, intentions (DLM, LPE), and the fleet HTTP API.
+//! Planner service: the fleet core that replans every robot's path through the `planning`
+//! crate's intention pipeline, and the fleet HTTP API.
 //!
-//! - [`planning`]: hybrid A* on an inflated occupancy grid with a cached obstacle heuristic,
-//!   Dubins analytic expansion, a shortcut smoother and a plain 2-D A* reference.
-//! - [`intention`]: the paper's two intentions derived from a planned path (DLM, LPE image).
 //! - [`config`]: the service configuration file (`[planner]`, `[dlm]`, `[lpe]`, `[http]`,
 //!   `[zenoh]`).
 //! - [`fleet`]: robot registry, delivery tasks (redb) and the per-robot replanning loop over
@@ -10,8 +8,7 @@
 //! - [`http`]: the HTTP API (docs/api.md) and the running service behind `serve`.
 //! - [`demo`]: the fleet demo (service + simulator + agents as processes); [`fleet_bench`]:
 //!   the replanning-loop benchmark.
-//! - [`cli`], [`bench`], [`picture`]: the `planner-service` command line, its benchmark and
-//!   map + path pictures.
+//! - [`cli`], [`bench`]: the `planner-service` command line and its planner benchmark.
 
 pub mod bench;
 pub mod cli;
@@ -20,6 +17,3 @@ pub mod demo;
 pub mod fleet;
 pub mod fleet_bench;
 pub mod http;
-pub mod intention;
-pub mod picture;
-pub mod planning;

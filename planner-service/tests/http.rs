@@ -16,7 +16,7 @@ use serde_json::Value;
 const TOKEN: &str = "test-token-0123456789";
 
 fn nav2(file: &str) -> PathBuf {
-    map_store::paths::nav2_maps_dir().join(file)
+    test_support::nav2_maps_dir().join(file)
 }
 
 fn read(file: &str) -> Vec<u8> {

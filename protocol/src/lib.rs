@@ -74,9 +74,10 @@ pub use ids::{IdError, IdRejection, MapId, MapName, RobotId, SiteId, TaskId};
 pub use keys::RobotTopic;
 pub use lpe::{LpeParams, LpeParamsError};
 pub use messages::{
-    normalize_angle, AgentState, AgentStatus, CameraFrame, CmdVel, Dlm, Header, Image,
-    ImageEncoding, Intention, LaserScan, MapGrid, MapMeta, MapRef, Odometry, Pose2D, PoseEstimate,
-    StopReason, TaskEvent, TaskState, ValidationError, UNKNOWN_CELL,
+    normalize_angle, AgentState, AgentStatus, CameraFrame, CmdVel, ControllerKind, Dlm, Header,
+    Image, ImageEncoding, Intention, LaserScan, MapGrid, MapMeta, MapRef, Odometry, Pose2D,
+    PoseEstimate, StopReason, TaskEvent, TaskState, UnknownController, ValidationError,
+    UNKNOWN_CELL,
 };
 pub use zenoh_io::{
     decode_sample, encoding_for, loopback_pair, peer_config, PublishError, SessionError,

@@ -495,6 +495,87 @@ impl fmt::Display for StopReason {
     }
 }
 
+/// Which controller turns observations and intentions into (v, ω).
+///
+/// The same names in the agent's configuration, on its command line and in its `AgentStatus`
+/// (`dlm`, `lpe`, `none`, `path-tracker`, `dynamic-window`); statuses of agents from before
+/// the kind was typed (`dlm_net`, `lpe_net`, …) still decode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ControllerKind {
+    /// Intention-net with the discretized-local-move intention (ONNX model).
+    #[serde(alias = "dlm_net")]
+    Dlm,
+    /// Intention-net with the local-path-and-environment image (ONNX model).
+    #[serde(alias = "lpe_net")]
+    Lpe,
+    /// Camera-only network, the paper's Non-Intention Net ablation (ONNX model).
+    #[serde(alias = "non_intention_net")]
+    None,
+    /// Pure pursuit on the planned path, no camera.
+    #[serde(alias = "path_tracker")]
+    PathTracker,
+    /// Dynamic window approach on the laser scan and the planned path.
+    #[serde(alias = "dynamic_window")]
+    DynamicWindow,
+}
+
+impl ControllerKind {
+    /// Every kind, in the order the command line lists them.
+    pub const ALL: [ControllerKind; 5] = [
+        Self::Dlm,
+        Self::Lpe,
+        Self::None,
+        Self::PathTracker,
+        Self::DynamicWindow,
+    ];
+
+    /// The name used in the configuration file and on the command line.
+    #[must_use]
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Dlm => "dlm",
+            Self::Lpe => "lpe",
+            Self::None => "none",
+            Self::PathTracker => "path-tracker",
+            Self::DynamicWindow => "dynamic-window",
+        }
+    }
+
+    /// Whether this controller reads LPE images, so the planner must send them.
+    #[must_use]
+    pub fn reads_lpe(self) -> bool {
+        self == Self::Lpe
+    }
+
+    /// Whether this controller runs a neural network and so needs a model file.
+    #[must_use]
+    pub fn needs_model(self) -> bool {
+        matches!(self, Self::Dlm | Self::Lpe | Self::None)
+    }
+}
+
+impl std::fmt::Display for ControllerKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// A controller name that is none of [`ControllerKind::ALL`].
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown controller `{0}`: expected one of dlm, lpe, none, path-tracker, dynamic-window")]
+pub struct UnknownController(pub String);
+
+impl std::str::FromStr for ControllerKind {
+    type Err = UnknownController;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::ALL
+            .into_iter()
+            .find(|k| k.as_str() == s)
+            .ok_or_else(|| UnknownController(s.to_string()))
+    }
+}
+
 /// Periodic status of a robot agent.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -502,8 +583,8 @@ pub struct AgentStatus {
     pub header: Header,
     pub state: AgentState,
     pub stop_reason: Option<StopReason>,
-    /// Name of the active controller, e.g. `"dlm_net"`, `"path_tracker"`.
-    pub controller: String,
+    /// The active controller.
+    pub controller: ControllerKind,
     /// The map the agent localizes on, once it has one.
     pub map: Option<MapRef>,
     pub localized: bool,

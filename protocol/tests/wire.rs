@@ -8,10 +8,10 @@ use std::io::Cursor;
 
 use protocol::codec::{peek_kind, FRAME_MAGIC, FRAME_PREFIX_LEN};
 use protocol::{
-    decode, encode, AgentState, AgentStatus, CameraFrame, CmdVel, DecodeError, Dlm, EncodeError,
-    Header, Image, ImageEncoding, Intention, LaserScan, MapGrid, MapId, MapMeta, MapName, MapRef,
-    Odometry, Pose2D, PoseEstimate, RobotId, StopReason, TaskEvent, TaskId, TaskState, WireMessage,
-    UNKNOWN_CELL, WIRE_VERSION,
+    decode, encode, AgentState, AgentStatus, CameraFrame, CmdVel, ControllerKind, DecodeError, Dlm,
+    EncodeError, Header, Image, ImageEncoding, Intention, LaserScan, MapGrid, MapId, MapMeta,
+    MapName, MapRef, Odometry, Pose2D, PoseEstimate, RobotId, StopReason, TaskEvent, TaskId,
+    TaskState, WireMessage, UNKNOWN_CELL, WIRE_VERSION,
 };
 
 fn header(seq: u64) -> Header {
@@ -128,7 +128,7 @@ fn status() -> AgentStatus {
         header: header(7),
         state: AgentState::Stopping,
         stop_reason: Some(StopReason::StaleIntention { age_ms: 640 }),
-        controller: "dlm_net".into(),
+        controller: ControllerKind::Dlm,
         map: Some(map_ref()),
         localized: true,
     }

@@ -15,7 +15,7 @@ use std::hint::black_box;
 use std::sync::Arc;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use map_store::{DistanceField, Sources};
+use map_core::{DistanceField, Sources};
 use protocol::{Header, Odometry, Pose2D};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

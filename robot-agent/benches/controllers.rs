@@ -14,13 +14,14 @@ mod amcl_world;
 use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use protocol::{Dlm, Header, Intention, MapName, MapRef, Pose2D};
+use protocol::{Dlm, Intention, Pose2D};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use robot_agent::controllers::{
     ControlInput, Controller, DynamicWindow, DynamicWindowConfig, PathTracker, PathTrackerConfig,
 };
 use robot_agent::Limits;
+use test_support::fixtures;
 
 fn bench_step(c: &mut Criterion) {
     let mut truth = amcl_world::load_nav2("depot");
@@ -33,18 +34,8 @@ fn bench_step(c: &mut Criterion) {
         .map(|i| Pose2D::new(2.0 + 0.1 * f64::from(i), 7.5, 0.0))
         .collect();
     let intention = Intention {
-        header: Header::default(),
-        task_id: None,
-        goal_index: 0,
-        answers_pose_seq: 0,
-        answers_pose_stamp_ns: 0,
-        map: MapRef {
-            name: MapName::new("depot").expect("map name"),
-            version: 1,
-        },
-        path,
-        dlm: Dlm::GoForward,
-        lpe: None,
+        map: fixtures::map_ref("depot"),
+        ..fixtures::intention(path, Dlm::GoForward)
     };
     let limits = Limits::default();
     let input = ControlInput {

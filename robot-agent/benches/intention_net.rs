@@ -14,14 +14,13 @@ use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use image::{ImageFormat, RgbImage};
-use protocol::{
-    CameraFrame, Dlm, Header, Image, ImageEncoding, Intention, MapName, MapRef, Pose2D,
-};
+use protocol::{CameraFrame, Dlm, Header, Image, ImageEncoding, Intention, Pose2D};
 use robot_agent::controllers::intention_net::preprocess;
 use robot_agent::controllers::{
     ControlInput, Controller, IntentionNet, IntentionNetOptions, ModelExpectation,
 };
 use robot_agent::{ControllerKind, Limits};
+use test_support::fixtures;
 
 const SIZE_PX: u32 = 224;
 
@@ -45,17 +44,8 @@ fn png(image: &Image) -> Image {
 fn intention(lpe: Option<Image>) -> Intention {
     Intention {
         header: Header::new(1, 0),
-        task_id: None,
-        goal_index: 0,
         answers_pose_seq: 1,
-        answers_pose_stamp_ns: 0,
-        map: MapRef {
-            name: MapName::new("bench").unwrap(),
-            version: 1,
-        },
-        path: Vec::new(),
-        dlm: Dlm::GoForward,
-        lpe,
+        ..fixtures::intention_for_net(Dlm::GoForward, lpe)
     }
 }
 

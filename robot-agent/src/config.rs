@@ -3,90 +3,12 @@
 //! nested parameters of localization (`[amcl]`) and of each controller.
 
 use std::path::PathBuf;
-use std::str::FromStr;
 
+pub use protocol::{ControllerKind, UnknownController};
 use protocol::{MapName, Pose2D, SiteId};
 
 use crate::amcl::{AmclConfig, AmclError};
 use crate::controllers::{DynamicWindowConfig, PathTrackerConfig};
-
-/// Which controller turns observations and intentions into (v, ω).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum ControllerKind {
-    /// Intention-net with the discretized-local-move intention (ONNX model).
-    Dlm,
-    /// Intention-net with the local-path-and-environment image (ONNX model).
-    Lpe,
-    /// Camera-only network, the paper's Non-Intention Net ablation (ONNX model).
-    None,
-    /// Pure pursuit on the planned path, no camera.
-    PathTracker,
-    /// Dynamic window approach on the laser scan and the planned path.
-    DynamicWindow,
-}
-
-impl ControllerKind {
-    /// Every kind, in the order the command line lists them.
-    pub const ALL: [ControllerKind; 5] = [
-        Self::Dlm,
-        Self::Lpe,
-        Self::None,
-        Self::PathTracker,
-        Self::DynamicWindow,
-    ];
-
-    /// The name used in the configuration file and on the command line.
-    #[must_use]
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::Dlm => "dlm",
-            Self::Lpe => "lpe",
-            Self::None => "none",
-            Self::PathTracker => "path-tracker",
-            Self::DynamicWindow => "dynamic-window",
-        }
-    }
-
-    /// The controller's name in `AgentStatus::controller`.
-    #[must_use]
-    pub fn status_name(self) -> &'static str {
-        match self {
-            Self::Dlm => "dlm_net",
-            Self::Lpe => "lpe_net",
-            Self::None => "non_intention_net",
-            Self::PathTracker => "path_tracker",
-            Self::DynamicWindow => "dynamic_window",
-        }
-    }
-
-    /// Whether this controller runs a neural network and so needs a model file.
-    #[must_use]
-    pub fn needs_model(self) -> bool {
-        matches!(self, Self::Dlm | Self::Lpe | Self::None)
-    }
-}
-
-impl std::fmt::Display for ControllerKind {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
-
-/// A controller name that is none of [`ControllerKind::ALL`].
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("unknown controller `{0}`: expected one of dlm, lpe, none, path-tracker, dynamic-window")]
-pub struct UnknownController(pub String);
-
-impl FromStr for ControllerKind {
-    type Err = UnknownController;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        Self::ALL
-            .into_iter()
-            .find(|k| k.as_str() == s)
-            .ok_or_else(|| UnknownController(s.to_string()))
-    }
-}
 
 /// Velocity and acceleration limits of the base; network outputs in [-1, 1] scale by these.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]

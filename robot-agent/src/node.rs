@@ -21,7 +21,7 @@ use std::future::Future;
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use map_store::OccupancyGrid;
+use map_core::OccupancyGrid;
 use protocol::keys::{self, RobotTopic};
 use protocol::{
     AgentState, AgentStatus, CameraFrame, CmdVel, Dlm, Header, Intention, LaserScan, MapGrid,
@@ -491,7 +491,7 @@ impl Supervisor {
             header: Header::new(seq, stamp_ns),
             state: self.state,
             stop_reason: self.stop_reason.clone(),
-            controller: self.config.controller.status_name().to_string(),
+            controller: self.config.controller,
             map: Some(self.map.clone()),
             localized: self.localized(),
         }
@@ -611,7 +611,7 @@ async fn run_in_session(
         header: Header::new(status_seq, clock.stamp_ns(Instant::now())),
         state: AgentState::Starting,
         stop_reason: None,
-        controller: config.controller.status_name().to_string(),
+        controller: config.controller,
         map: None,
         localized: false,
     };
@@ -623,7 +623,7 @@ async fn run_in_session(
     let mut backoff = Duration::from_millis(100);
     let map = loop {
         let fetch =
-            map_store::fetch_map(session, &site, map_name, config.map_version, fetch_timeout);
+            map_core::fetch_map(session, &site, map_name, config.map_version, fetch_timeout);
         tokio::select! {
             () = &mut shutdown => {
                 tracing::info!("shutdown before the map arrived");

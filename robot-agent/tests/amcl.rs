@@ -9,7 +9,7 @@ mod amcl_world;
 use std::sync::Arc;
 
 use amcl_world::{depot_world, drive, sandbox_world, Laser, OdometrySim};
-use map_store::{CellClass, DistanceField, OccupancyGrid, Sources};
+use map_core::{CellClass, DistanceField, OccupancyGrid, Sources};
 use protocol::{normalize_angle, Pose2D};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

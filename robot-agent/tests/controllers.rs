@@ -12,8 +12,8 @@ mod amcl_world;
 use std::collections::VecDeque;
 
 use amcl_world::{add_box, add_disc, load_nav2, Laser};
-use map_store::{CellClass, DistanceField, OccupancyGrid, Sources};
-use protocol::{Dlm, Header, Intention, MapName, MapRef, Pose2D};
+use map_core::{CellClass, DistanceField, OccupancyGrid, Sources};
+use protocol::{Dlm, Intention, Pose2D};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use robot_agent::controllers::{
@@ -21,6 +21,7 @@ use robot_agent::controllers::{
     PathTrackerConfig,
 };
 use robot_agent::Limits;
+use test_support::fixtures::{self, map_ref};
 
 /// The Pioneer-sized disc every test robot is.
 const RADIUS_M: f64 = 0.25;
@@ -30,18 +31,8 @@ const SUBSTEPS: usize = 5;
 
 fn intention(path: Vec<Pose2D>) -> Intention {
     Intention {
-        header: Header::default(),
-        task_id: None,
-        goal_index: 0,
-        answers_pose_seq: 0,
-        answers_pose_stamp_ns: 0,
-        map: MapRef {
-            name: MapName::new("depot").unwrap(),
-            version: 1,
-        },
-        path,
-        dlm: Dlm::GoForward,
-        lpe: None,
+        map: map_ref("depot"),
+        ..fixtures::intention(path, Dlm::GoForward)
     }
 }
 

@@ -11,9 +11,7 @@ use std::io::Cursor;
 use std::path::{Path, PathBuf};
 
 use image::{ImageFormat, RgbImage};
-use protocol::{
-    CameraFrame, Dlm, Header, Image, ImageEncoding, Intention, MapName, MapRef, Pose2D,
-};
+use protocol::{CameraFrame, Dlm, Header, Image, ImageEncoding, Intention, Pose2D};
 use robot_agent::controllers::intention_net::runtime::{self, RuntimeError};
 use robot_agent::controllers::intention_net::{IntentionNetError, LpeRendering};
 use robot_agent::controllers::{
@@ -22,6 +20,7 @@ use robot_agent::controllers::{
 };
 use robot_agent::{AgentConfig, ControllerKind, Limits};
 use serde_json::Value;
+use test_support::fixtures;
 
 const SIZE_PX: u32 = 224;
 
@@ -89,17 +88,9 @@ fn frame(image: Image) -> CameraFrame {
 fn intention(dlm: Dlm, lpe: Option<Image>) -> Intention {
     Intention {
         header: Header::new(1, 1_000),
-        task_id: None,
-        goal_index: 0,
         answers_pose_seq: 1,
         answers_pose_stamp_ns: 1_000,
-        map: MapRef {
-            name: MapName::new("fixture").unwrap(),
-            version: 1,
-        },
-        path: Vec::new(),
-        dlm,
-        lpe,
+        ..fixtures::intention_for_net(dlm, lpe)
     }
 }
 

@@ -9,18 +9,19 @@
 // Test helpers panic on broken setup: that is the failure report.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use clap::Parser;
 use map_store::{ImportLimits, MapServer, MapStore};
-use planner_service::intention::{dlm_from_path, render_lpe, DlmParams, LpeParams};
-use planner_service::planning::{Planner, PlannerConfig, PlanningMap};
+use planning::{
+    stop_intention, Answer as Planned, Goal, GoalProgress, IntentionConfig, IntentionPlanner,
+    PlanningMap,
+};
 use protocol::keys::{self, RobotTopic};
 use protocol::{
-    AgentState, AgentStatus, CmdVel, Header, Image, ImageEncoding, Intention, MapName, Odometry,
-    Pose2D, PoseEstimate, RobotId, SiteId, StopReason, TaskId,
+    AgentState, AgentStatus, CmdVel, Header, MapName, Odometry, Pose2D, PoseEstimate, RobotId,
+    SiteId, StopReason, TaskId,
 };
 use robot_agent::cli::Cli;
 use robot_agent::node::{self, NodeOptions};
@@ -33,13 +34,7 @@ use zenoh::Session;
 /// Serializes the tests across their runtimes (an async lock: it is held across awaits).
 static SERIAL: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn scenario(name: &str) -> PathBuf {
-    repo().join("sim/scenarios").join(format!("{name}.yaml"))
-}
+use test_support::{repo_root as repo, scenario};
 
 /// What the test-side planner does with each pose.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -167,8 +162,10 @@ impl Harness {
         let grid = map_store::load_ros_map(&plan_path, &ImportLimits::default())
             .unwrap()
             .grid;
-        let planning = Arc::new(PlanningMap::new(grid, &PlannerConfig::default()).unwrap());
-        let mut planner = Planner::new(Arc::clone(&planning), PlannerConfig::default()).unwrap();
+        let config = IntentionConfig::default();
+        let planning = Arc::new(PlanningMap::new(grid, &config.planner).unwrap());
+        let mut pipeline = IntentionPlanner::new(planning, config).unwrap();
+        let goals = [Goal::at(goal.0, goal.1)];
         let poses = hub
             .declare_subscriber(keys::robot(&site, &robot, RobotTopic::Pose))
             .await
@@ -181,8 +178,8 @@ impl Harness {
         let mut stop_rx2 = stop_rx.clone();
         tasks.push(tokio::spawn(async move {
             let mut seq = 0;
-            let mut travelled: Vec<Pose2D> = Vec::new();
             let mut complained = false;
+            let task_id = Some(TaskId::new("task_1").unwrap());
             loop {
                 let sample = tokio::select! {
                     s = poses.recv_async() => match s { Ok(s) => s, Err(_) => break },
@@ -196,42 +193,24 @@ impl Harness {
                 let Answer::Plan { lpe } = *answer_rx.borrow() else {
                     continue;
                 };
-                let p = pose.pose;
-                travelled.push(p);
-                let goal_pose = Pose2D::new(goal.0, goal.1, (goal.1 - p.y_m).atan2(goal.0 - p.x_m));
-                let path = match planner.plan(p, goal_pose) {
-                    Ok(path) => path.poses,
-                    Err(e) => {
+                seq += 1;
+                let header = Header::new(seq, pose.header.stamp_ns);
+                let intention = match pipeline.answer(&pose, &GoalProgress::new(&goals, 0), lpe) {
+                    Planned::Heading {
+                        goal_index,
+                        plan: Ok(p),
+                    } => p.intention(header, &pose, task_id.clone(), goal_index, lpe),
+                    Planned::Heading {
+                        goal_index,
+                        plan: Err(e),
+                    } => {
                         if !complained {
-                            eprintln!("planner: no path from {p:?}: {e} (said once)");
+                            eprintln!("planner: no path from {:?}: {e} (said once)", pose.pose);
                             complained = true;
                         }
-                        continue;
+                        stop_intention(header, &pose, task_id.clone(), goal_index)
                     }
-                };
-                let lpe = lpe.then(|| {
-                    let img =
-                        render_lpe(planning.grid(), p, &travelled, &path, &LpeParams::default())
-                            .unwrap();
-                    Image::new(
-                        img.image.width(),
-                        img.image.height(),
-                        ImageEncoding::Rgb8,
-                        img.image.into_raw(),
-                    )
-                    .unwrap()
-                });
-                seq += 1;
-                let intention = Intention {
-                    header: Header::new(seq, pose.header.stamp_ns),
-                    task_id: Some(TaskId::new("task_1").unwrap()),
-                    goal_index: 0,
-                    answers_pose_seq: pose.header.seq,
-                    answers_pose_stamp_ns: pose.header.stamp_ns,
-                    map: pose.map.clone(),
-                    dlm: dlm_from_path(&path, p, &DlmParams::default()),
-                    path,
-                    lpe,
+                    Planned::Done => stop_intention(header, &pose, task_id.clone(), 0),
                 };
                 protocol::zenoh_io::publish(&intention_pub, &intention)
                     .await
@@ -600,7 +579,7 @@ async fn controller_error_stops_the_robot() {
     .await;
     tokio::time::sleep(Duration::from_secs(1)).await;
     let status = h.rec.last_status().unwrap();
-    assert_eq!(status.controller, "lpe_net");
+    assert_eq!(status.controller, ControllerKind::Lpe);
     assert_eq!(status.state, AgentState::Stopped);
     let Some(StopReason::ControllerError { message }) = &status.stop_reason else {
         panic!("{status:?}");
@@ -660,7 +639,7 @@ async fn liveliness_status_and_pose_on_the_wire() {
         let statuses = h.rec.statuses.lock().unwrap();
         assert_eq!(statuses[0].1.state, AgentState::Starting);
         let last = &statuses.last().unwrap().1;
-        assert_eq!(last.controller, "dynamic_window");
+        assert_eq!(last.controller, ControllerKind::DynamicWindow);
         assert_eq!(last.map.as_ref().unwrap().name, h.map);
         assert!(last.localized);
     }

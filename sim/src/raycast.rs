@@ -4,7 +4,7 @@
 //! so nothing ever leaves the building). Rays walk the grid cell by cell (Amanatides & Woo), which
 //! costs one step per crossed cell and never misses a thin wall.
 
-use map_store::{CellClass, GridGeometry, OccupancyGrid};
+use map_core::{CellClass, GridGeometry, OccupancyGrid};
 
 /// What a ray hit on the wall grid.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -34,9 +34,9 @@ impl WallGrid {
         let wall: Vec<bool> = grid
             .cells()
             .iter()
-            .map(|&v| map_store::classify(v) != CellClass::Free)
+            .map(|&v| map_core::classify(v) != CellClass::Free)
             .collect();
-        let df = map_store::DistanceField::compute(grid, map_store::Sources::OccupiedOrUnknown);
+        let df = map_core::DistanceField::compute(grid, map_core::Sources::OccupiedOrUnknown);
         Self {
             geometry: *grid.geometry(),
             wall,

@@ -31,7 +31,7 @@ pub enum ScenarioError {
     Map {
         path: PathBuf,
         #[source]
-        source: map_store::MapError,
+        source: map_core::MapError,
     },
 }
 

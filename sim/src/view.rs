@@ -113,9 +113,9 @@ pub fn top_down(world: &World, scale: u32) -> RgbImage {
             let cx = i64::from(px / c.scale);
             let cy = i64::from(plan.height_cells() - 1 - py / c.scale);
             let color = match plan.class_at(cx, cy) {
-                map_store::CellClass::Free => [255, 255, 255],
-                map_store::CellClass::Occupied => [0, 0, 0],
-                map_store::CellClass::Unknown => [128, 128, 128],
+                map_core::CellClass::Free => [255, 255, 255],
+                map_core::CellClass::Occupied => [0, 0, 0],
+                map_core::CellClass::Unknown => [128, 128, 128],
             };
             c.img.put_pixel(px, py, Rgb(color));
         }

@@ -9,7 +9,7 @@
 
 use std::path::Path;
 
-use map_store::{ImportLimits, OccupancyGrid};
+use map_core::{ImportLimits, OccupancyGrid};
 use protocol::{Header, LaserScan, Odometry, Pose2D, RobotId};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -240,7 +240,7 @@ impl World {
     pub fn from_scenario_file(path: &Path, config: SimConfig) -> Result<Self, SimError> {
         let scenario = Scenario::load(path)?;
         let plan_path = scenario.floor_plan_path(path);
-        let plan = map_store::load_ros_map(&plan_path, &ImportLimits::default())
+        let plan = map_core::load_ros_map(&plan_path, &ImportLimits::default())
             .map_err(|source| ScenarioError::Map {
                 path: plan_path.clone(),
                 source,
@@ -797,7 +797,7 @@ impl World {
                     let (x, y) = grid.cell_to_world(cx, cy);
                     // A cell is blocked when any part of it touches the shape.
                     if s.distance(x, y) <= 0.5 * res * std::f64::consts::SQRT_2 {
-                        grid.set(cx, cy, map_store::OCCUPIED);
+                        grid.set(cx, cy, map_core::OCCUPIED);
                     }
                 }
             }

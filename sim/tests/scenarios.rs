@@ -7,7 +7,7 @@
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::path::{Path, PathBuf};
 
-use map_store::{CellClass, DistanceField, OccupancyGrid, Sources};
+use map_core::{CellClass, DistanceField, OccupancyGrid, Sources};
 use sim::scenario::{json_schema, Role, Scenario};
 use sim::{SimConfig, World};
 

@@ -485,13 +485,13 @@ fn camera_sees_people_and_other_robots() {
 /// plan: the LIDAR's shortest beam matches the plan's distance field.
 #[test]
 fn rotated_nav2_plan_lidar_matches_distance_field() {
-    use map_store::{DistanceField, ImportLimits, Sources};
-    let path = map_store::paths::nav2_maps_dir().join("tb3_sandbox.yaml");
-    let loaded = map_store::load_ros_map(&path, &ImportLimits::default())
+    use map_core::{DistanceField, ImportLimits, Sources};
+    let path = test_support::nav2_maps_dir().join("tb3_sandbox.yaml");
+    let loaded = map_core::load_ros_map(&path, &ImportLimits::default())
         .unwrap()
         .grid;
     let o = loaded.origin();
-    let plan = map_store::OccupancyGrid::new(
+    let plan = map_core::OccupancyGrid::new(
         loaded.width_cells(),
         loaded.height_cells(),
         loaded.resolution_m(),
@@ -509,7 +509,7 @@ fn rotated_nav2_plan_lidar_matches_distance_field() {
     for cy in 0..h {
         for cx in 0..w {
             let d = df.at(cx, cy);
-            if plan.class_at(cx, cy) == map_store::CellClass::Free
+            if plan.class_at(cx, cy) == map_core::CellClass::Free
                 && d < 3.0
                 && d > 0.6
                 && best.is_none_or(|(bd, _, _)| d > bd)

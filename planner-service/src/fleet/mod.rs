@@ -19,7 +19,7 @@ pub mod metrics;
 pub mod store;
 pub mod types;
 
-use std::collections::{HashMap, VecDeque};
+use std::collections::HashMap;
 use std::path::Path;
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError, Weak};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
@@ -27,7 +27,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use map_store::{MapError, MapStore};
 use protocol::keys::{self, RobotTopic};
 use protocol::{
-    AgentStatus, CameraFrame, Dlm, Header, Image, ImageEncoding, Intention, MapName, Pose2D,
+    AgentStatus, CameraFrame, Header, Image, ImageEncoding, Intention, MapName, Pose2D,
     PoseEstimate, RobotId, SiteId, TaskEvent, TaskId, TaskState, WireMessage,
 };
 use serde::{Deserialize, Serialize};
@@ -37,9 +37,10 @@ use zenoh::sample::{Sample, SampleKind};
 use zenoh::{Session, Wait};
 
 use crate::config::ServiceConfig;
-use crate::intention::{dlm_from_path, render_lpe, LpeImage};
-use crate::planning::error::Endpoint;
-use crate::planning::{MapKey, PlanError, Planner, PlannerConfig, PlanningMap};
+use planning::{
+    stop_intention, Answer, Endpoint, GoalProgress, IntentionPlanner, LpeImage, MapKey, PlanError,
+    PlanningMap,
+};
 
 pub use metrics::FleetMetrics;
 pub use store::{StoreError, TaskStore};
@@ -212,7 +213,6 @@ struct Robot {
     lpe_at: Option<Instant>,
     camera: Option<Arc<Image>>,
     camera_at: Option<Instant>,
-    trail: VecDeque<Pose2D>,
     paused_since: Option<Instant>,
     last_event: Option<Instant>,
     poses: watch::Sender<Option<Arrival>>,
@@ -235,15 +235,15 @@ impl Robot {
     fn wants_lpe(&self) -> bool {
         self.status
             .as_ref()
-            .is_some_and(|s| s.controller.to_ascii_lowercase().contains("lpe"))
+            .is_some_and(|s| s.controller.reads_lpe())
     }
 }
 
 /// Per-robot planning state, owned by the robot's worker.
 #[derive(Default)]
 struct WorkerState {
-    /// Planner for goals with a heading, and one for goals with any heading.
-    planners: Option<(Planner, Planner)>,
+    /// The robot's intention pipeline, made on its first task.
+    pipeline: Option<IntentionPlanner>,
     failures: u32,
 }
 
@@ -646,7 +646,11 @@ impl Fleet {
                     })
             };
             if let Some((robot_id, pose)) = stop {
-                self.publish_intention_for(&robot_id, &self.stop_intention(&pose, None, 0), None);
+                self.publish_intention_for(
+                    &robot_id,
+                    &stop_intention(self.header(), &pose, None, 0),
+                    None,
+                );
             }
             task
         };
@@ -831,7 +835,6 @@ impl Fleet {
                 lpe_at: None,
                 camera: None,
                 camera_at: None,
-                trail: VecDeque::new(),
                 paused_since: None,
                 last_event: None,
                 poses: tx,
@@ -861,16 +864,11 @@ impl Fleet {
         let came_back;
         let event = {
             let mut robots = lock(&self.robots);
-            let trail_len = self.config.fleet.trail_poses;
             let robot = self.robot_entry(&mut robots, &id);
             came_back = !robot.online;
             robot.online = true;
             robot.last_seen = received;
             robot.last_seen_ns = now_ns();
-            robot.trail.push_back(pose.pose);
-            while robot.trail.len() > trail_len {
-                robot.trail.pop_front();
-            }
             robot.pose = Some(pose.clone());
             robot.poses.send_replace(Some(Arrival { pose, received }));
             self.robot_event_due(robot, received)
@@ -1091,25 +1089,6 @@ impl Fleet {
         ))
     }
 
-    fn stop_intention(
-        &self,
-        pose: &PoseEstimate,
-        task: Option<TaskId>,
-        goal_index: u32,
-    ) -> Intention {
-        Intention {
-            header: self.header(),
-            task_id: task,
-            goal_index,
-            answers_pose_seq: pose.header.seq,
-            answers_pose_stamp_ns: pose.header.stamp_ns,
-            map: pose.map.clone(),
-            path: Vec::new(),
-            dlm: Dlm::Stop,
-            lpe: None,
-        }
-    }
-
     /// Publishes an intention to its robot and records it; `received` is when the answered
     /// pose arrived (None when the intention answers no new pose, e.g. a cancel).
     fn publish_intention_for(
@@ -1147,41 +1126,39 @@ impl Fleet {
     /// One replanning cycle of one robot for the pose that just arrived (blocking pool).
     fn cycle(&self, id: &RobotId, arrival: &Arrival, st: &mut WorkerState) {
         let pose = &arrival.pose;
-        let target = self.advance_task(id, pose);
-        let Some((task_id, goal_index, goal)) = target else {
-            let stop = self.stop_intention(pose, None, 0);
+        let Some((task_id, goals, next)) = self.advance_task(id, pose) else {
+            let stop = stop_intention(self.header(), pose, None, 0);
             self.publish_intention_for(id, &stop, Some(arrival.received));
             return;
         };
-        match self.replan(id, pose, goal_index, goal, st) {
-            Ok((path, lpe)) => {
+        let render_lpe = self.lpe_due(id);
+        let answer = self
+            .pipeline(pose, st)
+            .map(|pipeline| pipeline.answer(pose, &GoalProgress::new(&goals, next), render_lpe));
+        let planned = match answer {
+            Ok(Answer::Heading { goal_index, plan }) => {
+                plan.map(|p| (goal_index, p))
+                    .map_err(|source| FleetError::Planning {
+                        map: pose.map.name.to_string(),
+                        source,
+                    })
+            }
+            // `advance_task` already moved past every goal in reach of this pose.
+            Ok(Answer::Done) => Err(FleetError::Conflict(format!(
+                "task {task_id} has no goal left after goal {next}"
+            ))),
+            Err(e) => Err(e),
+        };
+        match planned {
+            Ok((goal_index, planned)) => {
                 st.failures = 0;
                 self.metrics.record_replan(true);
-                let dlm = dlm_from_path(&path, pose.pose, &self.config.dlm);
                 // The image travels only to a robot whose controller reads it; the dashboard's
                 // preview stays here.
                 let wants_lpe = lock(&self.robots).get(id).is_some_and(Robot::wants_lpe);
-                let lpe_image = lpe.as_ref().filter(|_| wants_lpe).and_then(|l| {
-                    Image::new(
-                        l.image.width(),
-                        l.image.height(),
-                        ImageEncoding::Rgb8,
-                        l.image.as_raw().clone(),
-                    )
-                    .ok()
-                });
-                let intention = Intention {
-                    header: self.header(),
-                    task_id: Some(task_id),
-                    goal_index,
-                    answers_pose_seq: pose.header.seq,
-                    answers_pose_stamp_ns: pose.header.stamp_ns,
-                    map: pose.map.clone(),
-                    path: thin_path(&path, self.config.fleet.intention_path_spacing_m),
-                    dlm,
-                    lpe: lpe_image,
-                };
-                if let Some(l) = lpe {
+                let intention =
+                    planned.intention(self.header(), pose, Some(task_id), goal_index, wants_lpe);
+                if let Some(l) = planned.lpe {
                     if let Some(r) = lock(&self.robots).get_mut(id) {
                         r.lpe = Some(Arc::new(l));
                         r.lpe_at = Some(Instant::now());
@@ -1193,12 +1170,12 @@ impl Fleet {
                 st.failures += 1;
                 self.metrics.record_replan(false);
                 tracing::debug!(robot = %id, task = %task_id, "replan failed ({}): {e}", st.failures);
-                let stop = self.stop_intention(pose, Some(task_id.clone()), goal_index);
+                let stop = stop_intention(self.header(), pose, Some(task_id.clone()), next);
                 self.publish_intention_for(id, &stop, Some(arrival.received));
                 if st.failures >= self.config.fleet.max_plan_failures {
                     st.failures = 0;
                     let reason = format!(
-                        "no path to goal {goal_index} after {} tries: {e}",
+                        "no path to goal {next} after {} tries: {e}",
                         self.config.fleet.max_plan_failures
                     );
                     self.finish_task(id, &task_id, TaskState::Failed { reason });
@@ -1208,8 +1185,13 @@ impl Fleet {
     }
 
     /// Brings the robot's task up to date with its pose: starts or resumes it, advances past
-    /// reached goals, completes it. Returns what to plan for, if anything.
-    fn advance_task(&self, id: &RobotId, pose: &PoseEstimate) -> Option<(TaskId, u32, Pose2D)> {
+    /// reached goals, completes it. Returns the task's goals and the index of the next one, if
+    /// there is anything to plan for.
+    fn advance_task(
+        &self,
+        id: &RobotId,
+        pose: &PoseEstimate,
+    ) -> Option<(TaskId, Vec<planning::Goal>, usize)> {
         let _guard = lock(&self.task_lock);
         let task_id = {
             let mut robots = lock(&self.robots);
@@ -1227,18 +1209,14 @@ impl Fleet {
             tracing::warn!(robot = %id, task = %task_id, "robot localizes on {}, task is on {}", pose.map.name, task.map);
             return None;
         }
-        let tol = self.config.fleet.goal_tolerance_m;
-        let mut k = task.goal_index().unwrap_or(0) as usize;
-        while let Some(g) = task.goals.get(k) {
-            if (pose.pose.x_m - g.x_m).hypot(pose.pose.y_m - g.y_m) > tol {
-                break;
+        let progress = GoalProgress::new(&task.goals, task.goal_index().unwrap_or(0) as usize);
+        let k = match progress.advance(pose.pose, self.config.fleet.goal_tolerance_m) {
+            planning::Advance::Done => {
+                self.finish_task_locked(id, &task_id, TaskState::Completed);
+                return None;
             }
-            k += 1;
-        }
-        if k >= task.goals.len() {
-            self.finish_task_locked(id, &task_id, TaskState::Completed);
-            return None;
-        }
+            planning::Advance::Heading { index, .. } => index,
+        };
         let goal_index = u32::try_from(k).unwrap_or(u32::MAX);
         let robot_id = id.clone();
         if let Err(e) = self.set_state(&task_id, |_| {
@@ -1250,13 +1228,7 @@ impl Fleet {
             tracing::error!(task = %task_id, "cannot update task: {e}");
             return None;
         }
-        let from = if k == 0 {
-            pose.pose
-        } else {
-            let p = task.goals[k - 1];
-            Pose2D::new(p.x_m, p.y_m, 0.0)
-        };
-        Some((task_id, goal_index, task.goals[k].pose_from(from)))
+        Some((task_id, task.goals, k))
     }
 
     /// Ends a task (completed or failed) and frees its robot.
@@ -1288,127 +1260,40 @@ impl Fleet {
         }
     }
 
-    fn replan(
+    /// The robot's intention pipeline on the planning map of the pose's map version.
+    fn pipeline<'a>(
         &self,
-        id: &RobotId,
         pose: &PoseEstimate,
-        goal_index: u32,
-        goal: Pose2D,
-        st: &mut WorkerState,
-    ) -> Result<(Vec<Pose2D>, Option<LpeImage>), FleetError> {
+        st: &'a mut WorkerState,
+    ) -> Result<&'a mut IntentionPlanner, FleetError> {
         let map = self.planning_map(&pose.map.name, pose.map.version)?;
-        let planners = match &mut st.planners {
-            Some(p) => {
-                if p.0.map().key() != map.key() || !Arc::ptr_eq(p.0.map(), &map) {
-                    p.0.set_map(Arc::clone(&map))
-                        .map_err(|source| FleetError::Planning {
-                            map: pose.map.name.to_string(),
-                            source,
-                        })?;
-                    p.1.set_map(Arc::clone(&map))
-                        .map_err(|source| FleetError::Planning {
-                            map: pose.map.name.to_string(),
-                            source,
-                        })?;
-                }
-                p
-            }
-            None => {
-                let fixed = Planner::new(Arc::clone(&map), self.config.planner.clone()).map_err(
-                    |source| FleetError::Planning {
-                        map: pose.map.name.to_string(),
-                        source,
-                    },
-                )?;
-                let free_cfg = PlannerConfig {
-                    goal_yaw_tolerance_rad: std::f64::consts::PI,
-                    ..self.config.planner.clone()
-                };
-                let free = Planner::new(Arc::clone(&map), free_cfg).map_err(|source| {
-                    FleetError::Planning {
-                        map: pose.map.name.to_string(),
-                        source,
-                    }
-                })?;
-                st.planners.insert((fixed, free))
-            }
+        let planning = |source| FleetError::Planning {
+            map: pose.map.name.to_string(),
+            source,
         };
-        let free_heading = self.goal_is_free(id, goal_index);
-        let planner = if free_heading {
-            &mut planners.1
+        if let Some(p) = &mut st.pipeline {
+            p.set_map(Arc::clone(&map)).map_err(planning)?;
         } else {
-            &mut planners.0
-        };
-        let path = planner
-            .plan(pose.pose, goal)
-            .map_err(|source| FleetError::Planning {
-                map: pose.map.name.to_string(),
-                source,
-            })?;
-        let lpe = self.lpe_if_due(id, &map, pose.pose, &path.poses);
-        Ok((path.poses, lpe))
+            let made = IntentionPlanner::new(Arc::clone(&map), self.config.intention())
+                .map_err(planning)?;
+            st.pipeline = Some(made);
+        }
+        st.pipeline
+            .as_mut()
+            .ok_or_else(|| FleetError::Conflict("no pipeline".into()))
     }
 
-    fn goal_is_free(&self, id: &RobotId, goal_index: u32) -> bool {
-        let task_id = lock(&self.robots).get(id).and_then(|r| r.task.clone());
-        task_id
-            .and_then(|t| lock(&self.live_tasks).get(&t).cloned())
-            .and_then(|t| t.goals.get(goal_index as usize).copied())
-            .is_some_and(|g| g.yaw_rad.is_none())
-    }
-
-    fn lpe_if_due(
-        &self,
-        id: &RobotId,
-        map: &PlanningMap,
-        robot: Pose2D,
-        path: &[Pose2D],
-    ) -> Option<LpeImage> {
+    /// Whether this cycle renders the LPE image: always for a robot whose controller reads it,
+    /// else at the preview interval while a dashboard watches.
+    fn lpe_due(&self, id: &RobotId) -> bool {
         let interval = Duration::from_millis(self.config.fleet.lpe_preview_interval_ms);
-        let trail: Vec<Pose2D> = {
-            let robots = lock(&self.robots);
-            let r = robots.get(id)?;
-            // Previews are for the dashboard: none while nobody watches the event stream.
-            let preview_due = self.events.receiver_count() > 0
-                && r.lpe_at.is_none_or(|t| t.elapsed() >= interval);
-            let due = r.wants_lpe() || preview_due;
-            if !due {
-                return None;
-            }
-            r.trail.iter().copied().collect()
-        };
-        match render_lpe(map.grid(), robot, &trail, path, &self.config.lpe) {
-            Ok(img) => Some(img),
-            Err(e) => {
-                tracing::warn!(robot = %id, "cannot render LPE: {e}");
-                None
-            }
-        }
+        let robots = lock(&self.robots);
+        robots.get(id).is_some_and(|r| {
+            r.wants_lpe()
+                || (self.events.receiver_count() > 0
+                    && r.lpe_at.is_none_or(|t| t.elapsed() >= interval))
+        })
     }
-}
-
-/// Keeps the first and last pose and every pose at least `spacing_m` from the last kept one or
-/// turned by more than 0.2 rad from it (turns in place); `spacing_m` 0 keeps everything.
-fn thin_path(path: &[Pose2D], spacing_m: f64) -> Vec<Pose2D> {
-    const TURN_RAD: f64 = 0.2;
-    let (Some(first), Some(last)) = (path.first(), path.last()) else {
-        return Vec::new();
-    };
-    if spacing_m <= 0.0 || path.len() <= 2 {
-        return path.to_vec();
-    }
-    let mut out = vec![*first];
-    let mut kept = *first;
-    for p in &path[1..path.len() - 1] {
-        let turned = protocol::normalize_angle(p.yaw_rad - kept.yaw_rad).abs();
-        // The tolerance keeps a pose exactly one spacing away despite rounding.
-        if p.distance_m(&kept) >= spacing_m - 1e-9 || turned >= TURN_RAD {
-            out.push(*p);
-            kept = *p;
-        }
-    }
-    out.push(*last);
-    out
 }
 
 fn not_found_task(e: FleetError, id: &TaskId) -> FleetError {
@@ -1516,35 +1401,5 @@ fn to_jpeg(img: &Image) -> Result<Vec<u8>, String> {
                 .map_err(|e| e.to_string())?;
             Ok(out.into_inner())
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn thinning_keeps_ends_spacing_and_turns_in_place() {
-        let mut path: Vec<Pose2D> = (0..=40)
-            .map(|i| Pose2D::new(f64::from(i) * 0.05, 0.0, 0.0))
-            .collect();
-        // A quarter turn in place at the end of the straight part.
-        for k in 1..=5 {
-            path.push(Pose2D::new(
-                2.0,
-                0.0,
-                f64::from(k) * std::f64::consts::FRAC_PI_2 / 5.0,
-            ));
-        }
-        path.push(Pose2D::new(2.0, 0.05, std::f64::consts::FRAC_PI_2));
-        let thin = thin_path(&path, 0.2);
-        assert_eq!(thin.first(), path.first());
-        assert_eq!(thin.last(), path.last());
-        let straight = thin.iter().filter(|p| p.yaw_rad == 0.0).count();
-        assert_eq!(straight, 11, "0 to 2 m every 0.2 m: {thin:?}");
-        let turning = thin.iter().filter(|p| p.yaw_rad > 0.0).count();
-        assert!(turning >= 5, "the turn in place survives: {thin:?}");
-        assert_eq!(thin_path(&path, 0.0), path);
-        assert!(thin_path(&[], 0.2).is_empty());
     }
 }

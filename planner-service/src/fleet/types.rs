@@ -5,31 +5,12 @@ use std::fmt;
 use std::str::FromStr;
 
 use protocol::{
-    AgentState, AgentStatus, Dlm, MapName, MapRef, Pose2D, PoseEstimate, RobotId, StopReason,
-    TaskId, TaskState,
+    AgentState, AgentStatus, ControllerKind, Dlm, MapName, MapRef, Pose2D, PoseEstimate, RobotId,
+    StopReason, TaskId, TaskState,
 };
 use serde::{Deserialize, Serialize};
 
-/// One goal of a delivery task; without `yaw_rad` any arrival heading is accepted.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Goal {
-    pub x_m: f64,
-    pub y_m: f64,
-    #[serde(default)]
-    pub yaw_rad: Option<f64>,
-}
-
-impl Goal {
-    /// The goal as a pose; a free heading becomes the direction of arrival from `from`.
-    #[must_use]
-    pub fn pose_from(&self, from: Pose2D) -> Pose2D {
-        let yaw = self
-            .yaw_rad
-            .unwrap_or_else(|| (self.y_m - from.y_m).atan2(self.x_m - from.x_m));
-        Pose2D::new(self.x_m, self.y_m, yaw)
-    }
-}
+pub use planning::Goal;
 
 /// A task as submitted over HTTP.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -221,7 +202,7 @@ impl From<&PoseEstimate> for PoseView {
 pub struct StatusView {
     pub state: AgentState,
     pub stop_reason: Option<StopReason>,
-    pub controller: String,
+    pub controller: ControllerKind,
     pub localized: bool,
 }
 
@@ -230,7 +211,7 @@ impl From<&AgentStatus> for StatusView {
         Self {
             state: s.state,
             stop_reason: s.stop_reason.clone(),
-            controller: s.controller.clone(),
+            controller: s.controller,
             localized: s.localized,
         }
     }

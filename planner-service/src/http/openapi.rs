@@ -158,7 +158,7 @@ fn schemas() -> Value {
             "properties": {
                 "state": { "type": "string", "enum": ["starting", "idle", "driving", "stopping", "stopped"] },
                 "stop_reason": { "oneOf": [r("StopReason"), { "type": "null" }] },
-                "controller": { "type": "string" },
+                "controller": { "type": "string", "enum": ["dlm", "lpe", "none", "path-tracker", "dynamic-window"] },
                 "localized": { "type": "boolean" }
             }
         },

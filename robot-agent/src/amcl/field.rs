@@ -6,7 +6,7 @@
 //! the sensor model looks a beam's likelihood up in a 256-entry table instead of evaluating a
 //! Gaussian per beam. The field is computed once per map version and shared by `Arc`.
 
-use map_store::{classify, CellClass, DistanceField, GridGeometry, OccupancyGrid, Sources};
+use map_core::{classify, CellClass, DistanceField, GridGeometry, OccupancyGrid, Sources};
 use protocol::Pose2D;
 
 use super::AmclError;
@@ -172,7 +172,7 @@ fn quantize(d_m: f64, max_dist_m: f64, scale: f64) -> u8 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use map_store::{FREE, OCCUPIED};
+    use map_core::{FREE, OCCUPIED};
 
     #[test]
     fn distances_are_clamped_and_quantized() {

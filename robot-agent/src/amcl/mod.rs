@@ -638,7 +638,7 @@ fn cholesky3(cov: &[f64; 9]) -> Result<[f64; 9], AmclError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use map_store::{OccupancyGrid, FREE, OCCUPIED};
+    use map_core::{OccupancyGrid, FREE, OCCUPIED};
     use protocol::Header;
 
     /// A 10 m x 6 m room with walls and an off-centre pillar, at 0.05 m.

@@ -741,25 +741,12 @@ impl Controller for DynamicWindow {
 mod tests {
     use super::*;
     use crate::config::Limits;
-    use protocol::{Dlm, Header, Intention, LaserScan, MapName, MapRef, Pose2D};
+    use protocol::{Dlm, Header, Intention, LaserScan, Pose2D};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
     fn intention(path: Vec<Pose2D>) -> Intention {
-        Intention {
-            header: Header::default(),
-            task_id: None,
-            goal_index: 0,
-            answers_pose_seq: 0,
-            answers_pose_stamp_ns: 0,
-            map: MapRef {
-                name: MapName::new("test").unwrap(),
-                version: 1,
-            },
-            path,
-            dlm: Dlm::GoForward,
-            lpe: None,
-        }
+        test_support::fixtures::intention(path, Dlm::GoForward)
     }
 
     fn straight_path(len_m: f64) -> Vec<Pose2D> {

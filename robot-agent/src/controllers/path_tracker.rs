@@ -387,23 +387,10 @@ pub(crate) fn checked_task<'a>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use protocol::{Header, Intention, MapName, MapRef};
+    use protocol::Intention;
 
     pub(crate) fn intention(path: Vec<Pose2D>, dlm: Dlm) -> Intention {
-        Intention {
-            header: Header::default(),
-            task_id: None,
-            goal_index: 0,
-            answers_pose_seq: 0,
-            answers_pose_stamp_ns: 0,
-            map: MapRef {
-                name: MapName::new("test").unwrap(),
-                version: 1,
-            },
-            path,
-            dlm,
-            lpe: None,
-        }
+        test_support::fixtures::intention(path, dlm)
     }
 
     fn input<'a>(

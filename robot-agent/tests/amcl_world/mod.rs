@@ -6,20 +6,13 @@
 
 #![allow(dead_code)]
 
-use map_store::paths::nav2_maps_dir;
-use map_store::{load_ros_map, CellClass, ImportLimits, OccupancyGrid, OCCUPIED};
+use map_core::{CellClass, OccupancyGrid, OCCUPIED};
 use protocol::{normalize_angle, Header, LaserScan, Odometry, Pose2D};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
-/// Loads `<name>.yaml` from the shared Nav2 maps.
-pub fn load_nav2(name: &str) -> OccupancyGrid {
-    let path = nav2_maps_dir().join(format!("{name}.yaml"));
-    load_ros_map(&path, &ImportLimits::default())
-        .unwrap_or_else(|e| panic!("loading {}: {e}", path.display()))
-        .grid
-}
+pub use test_support::nav2_map as load_nav2;
 
 /// Marks a rotated rectangle (centre, size, yaw) occupied.
 pub fn add_box(grid: &mut OccupancyGrid, cx_m: f64, cy_m: f64, w_m: f64, h_m: f64, yaw_rad: f64) {

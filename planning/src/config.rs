@@ -5,7 +5,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::error::PlanError;
+use crate::error::PlanError;
 
 /// Parameters of hybrid A* for one robot model (the `[planner]` table of the config file).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

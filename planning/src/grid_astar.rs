@@ -8,8 +8,8 @@ use std::collections::BinaryHeap;
 
 use protocol::Pose2D;
 
-use super::heuristic::MinKey;
-use super::map::PlanningMap;
+use crate::heuristic::MinKey;
+use crate::map::PlanningMap;
 
 /// A 2-D A* result.
 #[derive(Debug, Clone, Copy, PartialEq)]

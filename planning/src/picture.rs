@@ -6,7 +6,7 @@
 use std::path::Path as FsPath;
 
 use image::{ImageFormat, Rgb, RgbImage};
-use map_store::{CellClass, OccupancyGrid};
+use map_core::{CellClass, OccupancyGrid};
 use protocol::Pose2D;
 
 /// Maps wider or taller than this many cells are cropped around the path.
@@ -111,7 +111,7 @@ pub fn save_picture(img: &RgbImage, path: &FsPath) -> Result<(), PictureError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use map_store::{FREE as FREE_CELL, OCCUPIED as OCC_CELL};
+    use map_core::{FREE as FREE_CELL, OCCUPIED as OCC_CELL};
 
     #[test]
     fn north_up_with_start_and_goal_marked() {

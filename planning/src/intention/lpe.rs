@@ -11,7 +11,7 @@ use std::io::Cursor;
 use std::path::Path as FsPath;
 
 use image::{ImageFormat, RgbImage};
-use map_store::{CellClass, OccupancyGrid};
+use map_core::{CellClass, OccupancyGrid};
 use protocol::Pose2D;
 
 pub use protocol::LpeParams;

@@ -77,13 +77,17 @@ pub enum PlanError {
         reason: &'static str,
     },
 
+    /// DLM or LPE parameters out of range (the message names the field and value).
+    #[error("invalid intention parameters: {0}")]
+    InvalidParams(String),
+
     /// The planning map was built for a different robot radius than the planner's.
     #[error("planning map is inflated for robot radius {map_m} m but the planner is configured for {config_m} m")]
     RadiusMismatch { map_m: f64, config_m: f64 },
 }
 
 impl PlanError {
-    pub(crate) fn invalid_config(
+    pub fn invalid_config(
         field: &'static str,
         value: impl fmt::Display,
         reason: &'static str,

@@ -182,6 +182,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), MapError> {
 mod tests {
     use super::*;
     use crate::grid::{FREE, UNKNOWN};
+    use crate::nav2_maps_dir;
     use crate::ros::{load_ros_map, ImportLimits};
     use protocol::Pose2D;
 
@@ -196,7 +197,7 @@ mod tests {
     #[test]
     fn nav2_maps_round_trip_exactly() {
         for map in ["testmap", "depot", "tb3_sandbox", "warehouse"] {
-            let yaml = crate::paths::nav2_maps_dir().join(format!("{map}.yaml"));
+            let yaml = nav2_maps_dir().join(format!("{map}.yaml"));
             let original = load_ros_map(&yaml, &ImportLimits::default()).unwrap().grid;
             let back = round_trip(&original, &ExportOptions::default());
             assert_eq!(back, original, "{map}");

@@ -84,14 +84,14 @@ impl MapError {
     }
 
     /// Wraps a database error with what the store was doing.
-    pub(crate) fn store(action: &'static str, e: impl std::fmt::Display) -> Self {
+    pub fn store(action: &'static str, e: impl std::fmt::Display) -> Self {
         Self::Store {
             action,
             reason: e.to_string(),
         }
     }
 
-    pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Self::Io {
             path: path.into(),
             source,

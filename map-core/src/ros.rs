@@ -377,6 +377,7 @@ fn show(v: &Value) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::nav2_maps_dir;
 
     /// Nav2's `test_constants.cpp`: the expected grid, lower-left pixel first.
     const NAV2_TESTMAP: [i8; 100] = [
@@ -393,7 +394,7 @@ mod tests {
     ];
 
     fn shared_maps() -> PathBuf {
-        crate::paths::nav2_maps_dir()
+        nav2_maps_dir()
     }
 
     #[test]

@@ -8,12 +8,12 @@ use std::collections::VecDeque;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 
-use map_store::{DistanceField, OccupancyGrid, Sources};
+use map_core::{DistanceField, OccupancyGrid, Sources};
 use protocol::{normalize_angle, Pose2D};
 
-use super::config::PlannerConfig;
-use super::error::{Endpoint, PlanError};
-use super::heuristic::{CoarseGrid, ObstacleHeuristic};
+use crate::config::PlannerConfig;
+use crate::error::{Endpoint, PlanError};
+use crate::heuristic::{CoarseGrid, ObstacleHeuristic};
 
 /// Identifies a map version: the grid content hash, or a key the caller assigns.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -348,7 +348,7 @@ impl PlanningMap {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use map_store::{FREE, OCCUPIED};
+    use map_core::{FREE, OCCUPIED};
 
     #[test]
     fn curve_check_terminates_and_sees_walls() {

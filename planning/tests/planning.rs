@@ -6,16 +6,15 @@
 
 use std::sync::Arc;
 
-use map_store::{load_ros_map, CellClass, ImportLimits, OCCUPIED};
-use planner_service::bench::{pose_along, sample_pairs};
-use planner_service::planning::error::Endpoint;
-use planner_service::planning::grid_astar::GridAstar;
-use planner_service::planning::{Path, PlanError, Planner, PlannerConfig, PlanningMap};
+use map_core::{CellClass, OCCUPIED};
+use planning::error::Endpoint;
+use planning::grid_astar::GridAstar;
+use planning::sample::{pose_along, sample_pairs};
+use planning::{Path, PlanError, Planner, PlannerConfig, PlanningMap};
 use protocol::{normalize_angle, Pose2D};
 
-fn load(name: &str) -> map_store::OccupancyGrid {
-    let path = map_store::paths::nav2_maps_dir().join(name);
-    load_ros_map(&path, &ImportLimits::default()).unwrap().grid
+fn load(file: &str) -> map_core::OccupancyGrid {
+    test_support::nav2_map(file.trim_end_matches(".yaml"))
 }
 
 fn prepared(name: &str, cfg: &PlannerConfig) -> Arc<PlanningMap> {

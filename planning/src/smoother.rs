@@ -9,8 +9,8 @@
 
 use protocol::normalize_angle;
 
-use super::dubins::DubinsPath;
-use super::map::{GridPose, PlanningMap};
+use crate::dubins::DubinsPath;
+use crate::map::{GridPose, PlanningMap};
 
 /// Poses copied unchanged when no shortcut starts at a pose: a shortcut spanning fewer poses
 /// than this would gain almost nothing.

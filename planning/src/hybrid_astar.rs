@@ -22,13 +22,13 @@ use std::time::Instant;
 
 use protocol::{normalize_angle, Pose2D};
 
-use super::config::PlannerConfig;
-use super::dubins::DubinsPath;
-use super::error::{Endpoint, PlanError};
-use super::heuristic::{MinKey, ObstacleHeuristic};
-use super::map::{GridPose, PlanningMap};
-use super::path::{Path, PathStats};
-use super::smoother;
+use crate::config::PlannerConfig;
+use crate::dubins::DubinsPath;
+use crate::error::{Endpoint, PlanError};
+use crate::heuristic::{MinKey, ObstacleHeuristic};
+use crate::map::{GridPose, PlanningMap};
+use crate::path::{Path, PathStats};
+use crate::smoother;
 
 /// Multiply-shift hasher for the lattice keys: SipHash would cost more than the search step.
 #[derive(Default)]
@@ -268,7 +268,7 @@ impl Planner {
                 }
             }
         }
-        let length_m = super::path::length_of(&poses);
+        let length_m = crate::path::length_of(&poses);
         #[allow(clippy::cast_possible_truncation)]
         let plan_time_us = t0.elapsed().as_micros() as u64;
         Ok(Path {

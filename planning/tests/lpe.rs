@@ -6,8 +6,8 @@
 
 use std::path::PathBuf;
 
-use map_store::{load_ros_map, ImportLimits, OccupancyGrid, FREE, OCCUPIED, UNKNOWN};
-use planner_service::intention::{render_lpe, LpeImage, LpeParams};
+use map_core::{OccupancyGrid, FREE, OCCUPIED, UNKNOWN};
+use planning::intention::{render_lpe, LpeImage, LpeParams};
 use protocol::Pose2D;
 
 const RED: [u8; 3] = [255, 0, 0];
@@ -137,8 +137,7 @@ fn rotating_the_robot_rotates_the_image() {
 
 #[test]
 fn real_map_golden_image() {
-    let path = map_store::paths::nav2_maps_dir().join("tb3_sandbox.yaml");
-    let grid = load_ros_map(&path, &ImportLimits::default()).unwrap().grid;
+    let grid = test_support::nav2_map("tb3_sandbox");
     let robot = Pose2D::new(-0.5, 0.5, 0.3);
     let travelled = line((-1.5, 0.2), (-0.5, 0.5));
     let ahead = line((-0.5, 0.5), (1.0, 1.0));

@@ -1,0 +1,352 @@
+//! The intention pipeline: a pose estimate in, the intention for a task's goals out. This is
+//! the one place that goes "pose → goal advancement → hybrid A* → DLM, LPE, thinned path"; the
+//! fleet service's replanning workers, the closed-loop evaluation and every test that needs
+//! intentions call [`IntentionPlanner::answer`], so what is evaluated is what drives robots.
+//!
+//! One [`IntentionPlanner`] serves one robot: it keeps that robot's search state and the trail
+//! of poses it answered (the travelled part of the LPE image).
+
+use std::collections::VecDeque;
+use std::sync::Arc;
+
+use protocol::{Dlm, Header, Image, ImageEncoding, Intention, Pose2D, PoseEstimate, TaskId};
+use serde::{Deserialize, Serialize};
+
+use crate::config::PlannerConfig;
+use crate::error::PlanError;
+use crate::goals::{Advance, GoalProgress};
+use crate::hybrid_astar::Planner;
+use crate::intention::dlm::{dlm_from_path, DlmParams};
+use crate::intention::lpe::{render_lpe, LpeImage, LpeParams};
+use crate::map::PlanningMap;
+
+/// Everything the pipeline needs besides the map; the service fills it from its `[planner]`,
+/// `[dlm]`, `[lpe]` and `[fleet]` tables.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct IntentionConfig {
+    pub planner: PlannerConfig,
+    pub dlm: DlmParams,
+    pub lpe: LpeParams,
+    /// A goal counts as reached when the pose estimate is this close to it.
+    pub goal_tolerance_m: f64,
+    /// Spacing of the path sent in an intention (the planner's own is finer); turns in place
+    /// are kept whatever the spacing; 0 keeps every pose.
+    pub path_spacing_m: f64,
+    /// Answered poses kept as the travelled part of the LPE image.
+    pub trail_poses: usize,
+}
+
+impl Default for IntentionConfig {
+    fn default() -> Self {
+        Self {
+            planner: PlannerConfig::default(),
+            dlm: DlmParams::default(),
+            lpe: LpeParams::default(),
+            goal_tolerance_m: 0.35,
+            path_spacing_m: 0.2,
+            trail_poses: 60,
+        }
+    }
+}
+
+/// The pipeline's answer to one pose.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Answer {
+    /// Every goal is reached.
+    Done,
+    /// Heading for goal `goal_index`: the plan to it, or why there is none from this pose.
+    Heading {
+        goal_index: usize,
+        plan: Result<Planned, PlanError>,
+    },
+}
+
+/// A plan to the current goal with its intention.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Planned {
+    /// The goal as planned (a free heading resolved).
+    pub goal: Pose2D,
+    /// The planned path thinned to the configured spacing (what the intention carries).
+    pub path: Vec<Pose2D>,
+    /// Length of the full planned path.
+    pub length_m: f64,
+    pub dlm: Dlm,
+    /// Rendered when asked for.
+    pub lpe: Option<LpeImage>,
+}
+
+impl Planned {
+    /// The intention message answering `pose` (the LPE image travels only when `send_lpe`).
+    #[must_use]
+    pub fn intention(
+        &self,
+        header: Header,
+        pose: &PoseEstimate,
+        task_id: Option<TaskId>,
+        goal_index: usize,
+        send_lpe: bool,
+    ) -> Intention {
+        Intention {
+            header,
+            task_id,
+            goal_index: u32::try_from(goal_index).unwrap_or(u32::MAX),
+            answers_pose_seq: pose.header.seq,
+            answers_pose_stamp_ns: pose.header.stamp_ns,
+            map: pose.map.clone(),
+            path: self.path.clone(),
+            dlm: self.dlm,
+            lpe: self.lpe.as_ref().filter(|_| send_lpe).and_then(wire_image),
+        }
+    }
+}
+
+fn wire_image(lpe: &LpeImage) -> Option<Image> {
+    // An RGB buffer always matches its own size; `None` would only hide an impossible case.
+    Image::new(
+        lpe.image.width(),
+        lpe.image.height(),
+        ImageEncoding::Rgb8,
+        lpe.image.as_raw().clone(),
+    )
+    .ok()
+}
+
+/// A `Stop` intention answering `pose`: no task, the task ended, or no plan.
+#[must_use]
+pub fn stop_intention(
+    header: Header,
+    pose: &PoseEstimate,
+    task_id: Option<TaskId>,
+    goal_index: usize,
+) -> Intention {
+    Intention {
+        header,
+        task_id,
+        goal_index: u32::try_from(goal_index).unwrap_or(u32::MAX),
+        answers_pose_seq: pose.header.seq,
+        answers_pose_stamp_ns: pose.header.stamp_ns,
+        map: pose.map.clone(),
+        path: Vec::new(),
+        dlm: Dlm::Stop,
+        lpe: None,
+    }
+}
+
+/// One robot's intention pipeline (see the module docs).
+pub struct IntentionPlanner {
+    /// For goals with a heading.
+    fixed: Planner,
+    /// For goals with any heading (a heading tolerance of π).
+    free: Planner,
+    config: IntentionConfig,
+    trail: VecDeque<Pose2D>,
+}
+
+impl IntentionPlanner {
+    /// A pipeline on `map`.
+    ///
+    /// # Errors
+    /// [`PlanError::InvalidConfig`] for a bad planner or pipeline value,
+    /// [`PlanError::InvalidParams`] for bad DLM or LPE parameters;
+    /// [`PlanError::RadiusMismatch`] when the map was inflated for another robot.
+    pub fn new(map: Arc<PlanningMap>, config: IntentionConfig) -> Result<Self, PlanError> {
+        config.planner.validate()?;
+        config.dlm.validate().map_err(PlanError::InvalidParams)?;
+        config
+            .lpe
+            .validate()
+            .map_err(|e| PlanError::InvalidParams(format!("lpe: {e}")))?;
+        if !(config.goal_tolerance_m.is_finite() && config.goal_tolerance_m > 0.0) {
+            return Err(PlanError::invalid_config(
+                "goal_tolerance_m",
+                config.goal_tolerance_m,
+                "must be positive",
+            ));
+        }
+        if !(config.path_spacing_m.is_finite() && config.path_spacing_m >= 0.0) {
+            return Err(PlanError::invalid_config(
+                "path_spacing_m",
+                config.path_spacing_m,
+                "must be zero or positive",
+            ));
+        }
+        let fixed = Planner::new(Arc::clone(&map), config.planner.clone())?;
+        let free_config = PlannerConfig {
+            goal_yaw_tolerance_rad: std::f64::consts::PI,
+            ..config.planner.clone()
+        };
+        let free = Planner::new(map, free_config)?;
+        Ok(Self {
+            fixed,
+            free,
+            config,
+            trail: VecDeque::new(),
+        })
+    }
+
+    #[must_use]
+    pub fn config(&self) -> &IntentionConfig {
+        &self.config
+    }
+
+    /// The map the pipeline plans on.
+    #[must_use]
+    pub fn map(&self) -> &Arc<PlanningMap> {
+        self.fixed.map()
+    }
+
+    /// Plans on `map` from now on (a new map version); a no-op for the current map.
+    ///
+    /// # Errors
+    /// [`PlanError::RadiusMismatch`] when `map` was inflated for another robot.
+    pub fn set_map(&mut self, map: Arc<PlanningMap>) -> Result<(), PlanError> {
+        if Arc::ptr_eq(self.fixed.map(), &map) {
+            return Ok(());
+        }
+        self.fixed.set_map(Arc::clone(&map))?;
+        self.free.set_map(map)?;
+        self.trail.clear();
+        Ok(())
+    }
+
+    /// Forgets the travelled trail (the robot was carried or relocalised elsewhere).
+    pub fn clear_trail(&mut self) {
+        self.trail.clear();
+    }
+
+    /// Where `pose` leaves the robot on its goals (no planning).
+    #[must_use]
+    pub fn advance(&self, pose: Pose2D, progress: &GoalProgress<'_>) -> Advance {
+        progress.advance(pose, self.config.goal_tolerance_m)
+    }
+
+    /// Answers one pose: records it in the trail, moves past reached goals, plans hybrid A*
+    /// from the pose to the next goal and derives the DLM, the thinned path and (when
+    /// `render_lpe`) the LPE image.
+    pub fn answer(
+        &mut self,
+        pose: &PoseEstimate,
+        progress: &GoalProgress<'_>,
+        render_lpe: bool,
+    ) -> Answer {
+        let robot = pose.pose;
+        self.trail.push_back(robot);
+        while self.trail.len() > self.config.trail_poses {
+            self.trail.pop_front();
+        }
+        match self.advance(robot, progress) {
+            Advance::Done => Answer::Done,
+            Advance::Heading { index, target } => {
+                let free_heading = progress
+                    .goals
+                    .get(index)
+                    .is_some_and(|g| g.yaw_rad.is_none());
+                Answer::Heading {
+                    goal_index: index,
+                    plan: self.plan(robot, target, free_heading, render_lpe),
+                }
+            }
+        }
+    }
+
+    fn plan(
+        &mut self,
+        robot: Pose2D,
+        goal: Pose2D,
+        free_heading: bool,
+        render_lpe: bool,
+    ) -> Result<Planned, PlanError> {
+        let planner = if free_heading {
+            &mut self.free
+        } else {
+            &mut self.fixed
+        };
+        let path = planner.plan(robot, goal)?;
+        let dlm = dlm_from_path(&path.poses, robot, &self.config.dlm);
+        let lpe = if render_lpe {
+            let trail: Vec<Pose2D> = self.trail.iter().copied().collect();
+            // The parameters were validated in `new`, the only way rendering can fail.
+            render_lpe_image(
+                self.fixed.map(),
+                robot,
+                &trail,
+                &path.poses,
+                &self.config.lpe,
+            )
+        } else {
+            None
+        };
+        Ok(Planned {
+            goal,
+            path: thin_path(&path.poses, self.config.path_spacing_m),
+            length_m: path.length_m,
+            dlm,
+            lpe,
+        })
+    }
+}
+
+fn render_lpe_image(
+    map: &PlanningMap,
+    robot: Pose2D,
+    trail: &[Pose2D],
+    path: &[Pose2D],
+    params: &LpeParams,
+) -> Option<LpeImage> {
+    render_lpe(map.grid(), robot, trail, path, params).ok()
+}
+
+/// Keeps the first and last pose and every pose at least `spacing_m` from the last kept one or
+/// turned by more than 0.2 rad from it (turns in place); `spacing_m` 0 keeps everything.
+#[must_use]
+pub fn thin_path(path: &[Pose2D], spacing_m: f64) -> Vec<Pose2D> {
+    const TURN_RAD: f64 = 0.2;
+    let (Some(first), Some(last)) = (path.first(), path.last()) else {
+        return Vec::new();
+    };
+    if spacing_m <= 0.0 || path.len() <= 2 {
+        return path.to_vec();
+    }
+    let mut out = vec![*first];
+    let mut kept = *first;
+    for p in &path[1..path.len() - 1] {
+        let turned = protocol::normalize_angle(p.yaw_rad - kept.yaw_rad).abs();
+        // The tolerance keeps a pose exactly one spacing away despite rounding.
+        if p.distance_m(&kept) >= spacing_m - 1e-9 || turned >= TURN_RAD {
+            out.push(*p);
+            kept = *p;
+        }
+    }
+    out.push(*last);
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn thinning_keeps_ends_spacing_and_turns_in_place() {
+        let mut path: Vec<Pose2D> = (0..=40)
+            .map(|i| Pose2D::new(f64::from(i) * 0.05, 0.0, 0.0))
+            .collect();
+        // A quarter turn in place at the end of the straight part.
+        for k in 1..=5 {
+            path.push(Pose2D::new(
+                2.0,
+                0.0,
+                f64::from(k) * std::f64::consts::FRAC_PI_2 / 5.0,
+            ));
+        }
+        path.push(Pose2D::new(2.0, 0.05, std::f64::consts::FRAC_PI_2));
+        let thin = thin_path(&path, 0.2);
+        assert_eq!(thin.first(), path.first());
+        assert_eq!(thin.last(), path.last());
+        let straight = thin.iter().filter(|p| p.yaw_rad == 0.0).count();
+        assert_eq!(straight, 11, "0 to 2 m every 0.2 m: {thin:?}");
+        let turning = thin.iter().filter(|p| p.yaw_rad > 0.0).count();
+        assert!(turning >= 5, "the turn in place survives: {thin:?}");
+        assert_eq!(thin_path(&path, 0.0), path);
+        assert!(thin_path(&[], 0.2).is_empty());
+    }
+}

@@ -1,0 +1,52 @@
+//! Message fixtures: an intention along a path, the way controller tests and benchmarks feed
+//! one, without writing every field of the wire message again.
+
+use protocol::{Dlm, Header, Image, Intention, MapName, MapRef, Pose2D};
+
+/// Version 1 of the map `name`.
+#[must_use]
+pub fn map_ref(name: &str) -> MapRef {
+    MapRef {
+        name: MapName::new(name).expect("a valid map name"),
+        version: 1,
+    }
+}
+
+/// An intention to follow `path` with `dlm` on map `test` (no task, no LPE image, header and
+/// answered pose zero); override fields with struct update syntax where a test cares.
+#[must_use]
+pub fn intention(path: Vec<Pose2D>, dlm: Dlm) -> Intention {
+    Intention {
+        header: Header::default(),
+        task_id: None,
+        goal_index: 0,
+        answers_pose_seq: 0,
+        answers_pose_stamp_ns: 0,
+        map: map_ref("test"),
+        path,
+        dlm,
+        lpe: None,
+    }
+}
+
+/// An intention that carries only a DLM and maybe an LPE image (what a network reads).
+#[must_use]
+pub fn intention_for_net(dlm: Dlm, lpe: Option<Image>) -> Intention {
+    Intention {
+        lpe,
+        ..intention(Vec::new(), dlm)
+    }
+}
+
+/// A straight path from `(x0, y0)` along `yaw_rad`, one pose every `step_m` for `len_m`.
+#[must_use]
+pub fn straight_path(x0: f64, y0: f64, yaw_rad: f64, len_m: f64, step_m: f64) -> Vec<Pose2D> {
+    let n = (len_m / step_m).round().max(0.0) as usize;
+    let (s, c) = yaw_rad.sin_cos();
+    (0..=n)
+        .map(|i| {
+            let d = i as f64 * step_m;
+            Pose2D::new(x0 + c * d, y0 + s * d, yaw_rad)
+        })
+        .collect()
+}
