@@ -39,17 +39,14 @@ pub enum Cmd {
         /// Agent configuration TOML whose [amcl], [limits] and controller tables are used.
         #[arg(long)]
         config: Option<PathBuf>,
-        /// Directory of the task_<x>.yaml scenarios.
-        #[arg(long, default_value_os_t = default_scenarios_dir())]
-        scenarios: PathBuf,
+        /// Directory of the task_<x>.yaml scenarios (default: $FLEET_SCENARIOS_DIR,
+        /// ./sim/scenarios, ./scenarios or the user data directory).
+        #[arg(long)]
+        scenarios: Option<PathBuf>,
         /// Stop each task after this much simulated time (default: the scenario's limit).
         #[arg(long)]
         max_sim_s: Option<f64>,
     },
-}
-
-fn default_scenarios_dir() -> PathBuf {
-    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../sim/scenarios"))
 }
 
 /// Runs a command.
@@ -81,9 +78,10 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
                     anyhow::bail!("invalid --max-sim-s {s}: must be a positive number");
                 }
             }
+            let scenarios = protocol::data_dirs::find_scenarios_dir(scenarios.as_deref())?;
             let paths = tasks
                 .iter()
-                .map(|t| amcl_accuracy::task_scenario(scenarios, t))
+                .map(|t| amcl_accuracy::task_scenario(&scenarios, t))
                 .collect::<Result<Vec<_>, _>>()?;
             let options = AccuracyOptions {
                 seed: *seed,

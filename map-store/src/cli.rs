@@ -14,11 +14,15 @@
 //!       map_saver writes trinary maps.
 //!   list [--json]
 //!       Every stored version, by name, newest first.
-//!   serve [--site S] [--listen ENDPOINT]... [--connect ENDPOINT]...
-//!       Serve maps on fleet/<site>/map/<name>[/<version>] over Zenoh until Ctrl-C.
+//!   serve [--site S] [--zenoh-listen ENDPOINT]... [--zenoh-connect ENDPOINT]...
+//!         [--zenoh-multicast-scouting]
+//!       Serve maps on fleet/<site>/map/<name>[/<version>] over Zenoh until Ctrl-C
+//!       (`--listen`/`--connect` are aliases; multicast scouting is off unless asked for).
 //!   bench [--out results.json] [--markdown table.md] [--repeats N]
-//!       Time import + exact distance field of the Nav2 2000x2000 maps against a chamfer
-//!       reference, and redb put/get; writes JSON and prints a markdown table.
+//!       Time import + exact distance field of the Nav2 2000x2000 maps (<shared>/maps/nav2, the
+//!       shared folder found by `protocol::data_dirs`: $FLEET_SHARED_DIR, ./shared, ../shared or
+//!       the user data directory) against a chamfer reference, and redb put/get; writes JSON and
+//!       prints a markdown table.
 //! ```
 //!
 //! The data directory defaults to the user's data directory
@@ -36,7 +40,7 @@ use std::time::Duration;
 use anyhow::{anyhow, Context as _};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
-use protocol::{MapMeta, MapName, SiteId};
+use protocol::{MapMeta, MapName, SessionArgs, SiteId};
 
 use crate::bench::{markdown, run_bench, BENCH_MAPS};
 use crate::config::MapStoreConfig;
@@ -105,13 +109,18 @@ pub enum Command {
         json: bool,
     },
     /// Serve maps over Zenoh until Ctrl-C.
+    #[command(
+        mut_arg(SessionArgs::LISTEN_ID, |a| a.visible_alias("listen")),
+        mut_arg(SessionArgs::CONNECT_ID, |a| a.visible_alias("connect"))
+    )]
     Serve {
         #[arg(long)]
         site: Option<String>,
-        #[arg(long)]
-        listen: Vec<String>,
-        #[arg(long)]
-        connect: Vec<String>,
+        /// The Zenoh session: `--zenoh-listen` (alias `--listen`) and `--zenoh-connect` (alias
+        /// `--connect`) replace the config's lists, `--zenoh-multicast-scouting` turns
+        /// scouting on.
+        #[command(flatten)]
+        zenoh: SessionArgs,
     },
     /// Benchmark import, distance fields and storage.
     Bench {
@@ -238,20 +247,11 @@ where
                 }
             }
         }
-        Command::Serve {
-            site,
-            listen,
-            connect,
-        } => {
+        Command::Serve { site, zenoh } => {
             if let Some(site) = site {
                 config.site = SiteId::new(site)?;
             }
-            if !listen.is_empty() {
-                config.zenoh.listen = listen;
-            }
-            if !connect.is_empty() {
-                config.zenoh.connect = connect;
-            }
+            config.zenoh.override_with(&zenoh);
             let store = Arc::new(open_store(&config)?);
             let runtime = tokio::runtime::Builder::new_multi_thread()
                 .enable_all()
@@ -264,7 +264,7 @@ where
             markdown: md_path,
             repeats,
         } => {
-            let maps_dir = crate::paths::nav2_maps_dir();
+            let maps_dir = protocol::data_dirs::find_nav2_maps_dir(None)?;
             let bar = ProgressBar::new(BENCH_MAPS.len() as u64 + 1);
             bar.set_style(
                 ProgressStyle::with_template("{bar:30} {pos}/{len} {msg}")
@@ -294,9 +294,7 @@ async fn serve(
     store: Arc<MapStore>,
     out: &mut dyn Write,
 ) -> anyhow::Result<()> {
-    let session = zenoh::open(config.zenoh_config()?)
-        .await
-        .map_err(|e| anyhow!("cannot open the zenoh session: {e}"))?;
+    let session = config.zenoh.open().await?;
     let server = MapServer::start(&session, &config.site, store.clone()).await?;
     let names: Vec<String> = store
         .list()?
@@ -364,4 +362,36 @@ fn print_meta(out: &mut dyn Write, m: &MapMeta) -> std::io::Result<()> {
     writeln!(out, "occupied:   {}", m.occupied_cells)?;
     writeln!(out, "unknown:    {}", m.unknown_cells)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod session_flag_tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn serve_takes_the_shared_zenoh_flags_with_the_old_names_kept() {
+        Cli::command().debug_assert();
+        let cli = Cli::try_parse_from([
+            "map-store",
+            "serve",
+            "--listen",
+            "tcp/0.0.0.0:7448",
+            "--zenoh-connect",
+            "tcp/10.0.0.2:7447",
+        ])
+        .unwrap();
+        let Command::Serve { zenoh, .. } = cli.command else {
+            unreachable!("parsed a serve command")
+        };
+        assert_eq!(zenoh.listen, ["tcp/0.0.0.0:7448"]);
+        assert_eq!(zenoh.connect, ["tcp/10.0.0.2:7447"]);
+        assert!(!zenoh.multicast_scouting, "multicast is off by default");
+        let cli =
+            Cli::try_parse_from(["map-store", "serve", "--zenoh-multicast-scouting"]).unwrap();
+        let Command::Serve { zenoh, .. } = cli.command else {
+            unreachable!("parsed a serve command")
+        };
+        assert!(zenoh.multicast_scouting);
+    }
 }

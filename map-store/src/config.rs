@@ -5,7 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
-use protocol::SiteId;
+use protocol::{SessionArgs, SessionError, SiteId};
 use serde::{Deserialize, Serialize};
 
 use crate::error::MapError;
@@ -24,17 +24,9 @@ pub struct MapStoreConfig {
     pub data_dir: Option<PathBuf>,
     /// Image limits checked before decoding.
     pub limits: ImportLimits,
-    pub zenoh: ZenohEndpoints,
-}
-
-/// Zenoh endpoints, e.g. `tcp/127.0.0.1:7447`.
-#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct ZenohEndpoints {
-    /// Endpoints to connect to (a router or a peer).
-    pub connect: Vec<String>,
-    /// Endpoints to listen on.
-    pub listen: Vec<String>,
+    /// The Zenoh session (`[zenoh]`: `listen`, `connect`, `multicast`); endpoints such as
+    /// `tcp/127.0.0.1:7447`, multicast scouting off unless `multicast = true`.
+    pub zenoh: SessionArgs,
 }
 
 impl Default for MapStoreConfig {
@@ -43,7 +35,7 @@ impl Default for MapStoreConfig {
             site: default_site(),
             data_dir: None,
             limits: ImportLimits::default(),
-            zenoh: ZenohEndpoints::default(),
+            zenoh: SessionArgs::default(),
         }
     }
 }
@@ -57,16 +49,19 @@ fn default_site() -> SiteId {
 }
 
 impl MapStoreConfig {
-    /// Parses TOML text; `origin` labels errors.
+    /// Parses TOML text and checks it (the Zenoh endpoints included); `origin` labels errors.
     ///
     /// # Errors
-    /// [`MapError::Invalid`] on `config` naming the file and the TOML error (field and value).
+    /// [`MapError::Invalid`] on `config` naming the file and the TOML error (field and value),
+    /// or on `zenoh` naming the endpoint Zenoh cannot parse.
     pub fn from_toml(text: &str, origin: &Path) -> Result<Self, MapError> {
-        toml::from_str(text)
-            .map_err(|e| MapError::invalid("config", origin.display(), e.to_string()))
+        let config: Self = toml::from_str(text)
+            .map_err(|e| MapError::invalid("config", origin.display(), e.to_string()))?;
+        config.zenoh_config()?;
+        Ok(config)
     }
 
-    /// Reads and parses a TOML file.
+    /// Reads, parses and checks a TOML file.
     ///
     /// # Errors
     /// [`MapError::Io`] or as [`Self::from_toml`].
@@ -75,30 +70,26 @@ impl MapStoreConfig {
         Self::from_toml(&text, path)
     }
 
-    /// A Zenoh configuration with the endpoints set (multicast scouting stays at Zenoh's default).
+    /// The Zenoh configuration of the `[zenoh]` table (built by [`SessionArgs::config`]).
     ///
     /// # Errors
-    /// [`MapError::Invalid`] naming the endpoint list Zenoh refused.
+    /// [`MapError::Invalid`] on `zenoh` naming the endpoint or setting Zenoh refused.
     pub fn zenoh_config(&self) -> Result<zenoh::Config, MapError> {
-        let mut c = zenoh::Config::default();
-        for (field, list) in [
-            ("zenoh.connect", &self.zenoh.connect),
-            ("zenoh.listen", &self.zenoh.listen),
-        ] {
-            if list.is_empty() {
-                continue;
+        self.zenoh.config().map_err(|e| match e {
+            SessionError::Endpoint {
+                field,
+                endpoint,
+                reason,
+            } => {
+                let field = if field == "listen" {
+                    "zenoh.listen"
+                } else {
+                    "zenoh.connect"
+                };
+                MapError::invalid(field, format!("{endpoint:?}"), reason)
             }
-            let json = serde_json::to_string(list)
-                .map_err(|e| MapError::invalid(field, format!("{list:?}"), e.to_string()))?;
-            let key = if field == "zenoh.connect" {
-                "connect/endpoints"
-            } else {
-                "listen/endpoints"
-            };
-            c.insert_json5(key, &json)
-                .map_err(|e| MapError::invalid(field, format!("{list:?}"), e.to_string()))?;
-        }
-        Ok(c)
+            other => MapError::invalid("zenoh", "[zenoh]", other.to_string()),
+        })
     }
 }
 
@@ -128,9 +119,29 @@ mod tests {
         let e =
             MapStoreConfig::from_toml("[limits]\nmax_pixel = 3", Path::new("c.toml")).unwrap_err();
         assert!(e.to_string().contains("max_pixel"), "{e}");
-        let bad = MapStoreConfig::from_toml("[zenoh]\nlisten = [\"nonsense\"]", Path::new("c"))
-            .unwrap()
-            .zenoh_config();
-        assert!(bad.is_err());
+        // Endpoints are checked when the file is loaded, naming the bad one.
+        let e = MapStoreConfig::from_toml("[zenoh]\nlisten = [\"nonsense\"]", Path::new("c"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("listen") && e.contains("nonsense"), "{e}");
+        let e = MapStoreConfig::from_toml("[zenoh]\nmulticast = 1", Path::new("c"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("multicast"), "{e}");
+    }
+
+    #[test]
+    fn zenoh_table_is_the_shared_session_args() {
+        let cfg = MapStoreConfig::from_toml("", Path::new("empty")).unwrap();
+        assert!(!cfg.zenoh.multicast_scouting, "multicast is off by default");
+        let cfg = MapStoreConfig::from_toml(
+            "[zenoh]\nconnect = [\"tcp/10.0.0.2:7447\"]\nmulticast = true\n",
+            Path::new("c"),
+        )
+        .unwrap();
+        assert_eq!(cfg.zenoh.connect, ["tcp/10.0.0.2:7447"]);
+        assert!(cfg.zenoh.multicast_scouting);
+        let z = cfg.zenoh_config().unwrap();
+        assert_eq!(z.get_json("scouting/multicast/enabled").unwrap(), "true");
     }
 }

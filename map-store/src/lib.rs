@@ -13,7 +13,6 @@ pub mod bench;
 pub mod cli;
 pub mod config;
 pub mod import;
-pub mod paths;
 pub mod serve;
 pub mod store;
 

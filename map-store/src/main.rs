@@ -3,13 +3,10 @@
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
-        )
-        .with_writer(std::io::stderr)
-        .init();
+    if let Err(e) = protocol::telemetry::init_tracing("warn") {
+        eprintln!("error: {e}");
+        return ExitCode::FAILURE;
+    }
     let mut stdout = std::io::stdout();
     match map_store::cli::run(std::env::args_os(), &mut stdout) {
         Ok(()) => ExitCode::SUCCESS,

@@ -29,22 +29,32 @@ pub struct BenchOptions {
     pub config: PlannerConfig,
 }
 
+/// The benchmark maps: Nav2's three 100 m x 100 m maps (in `shared/maps/nav2`).
+pub const NAV2_BENCH_MAPS: [&str; 3] = ["100by100_10.yaml", "100by100_15.yaml", "100by100_20.yaml"];
+
 impl BenchOptions {
-    /// The benchmark: the three Nav2 100 m x 100 m maps, 1000 pairs each.
+    /// The benchmark on `maps`: 1000 pairs each, seed 1.
     #[must_use]
-    pub fn nav2_default() -> Self {
-        let dir = map_store::paths::nav2_maps_dir();
+    pub fn with_maps(maps: Vec<PathBuf>) -> Self {
         Self {
-            maps: ["100by100_10.yaml", "100by100_15.yaml", "100by100_20.yaml"]
-                .iter()
-                .map(|m| dir.join(m))
-                .collect(),
+            maps,
             pairs: 1000,
             seed: 1,
             min_separation_m: 3.0,
             replan_offset_m: 0.5,
             config: PlannerConfig::default(),
         }
+    }
+
+    /// The benchmark: [`NAV2_BENCH_MAPS`] in `nav2_maps_dir`, 1000 pairs each.
+    #[must_use]
+    pub fn nav2_default(nav2_maps_dir: &FsPath) -> Self {
+        Self::with_maps(
+            NAV2_BENCH_MAPS
+                .iter()
+                .map(|m| nav2_maps_dir.join(m))
+                .collect(),
+        )
     }
 }
 

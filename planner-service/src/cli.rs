@@ -14,7 +14,7 @@ use anyhow::Context;
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use map_store::{load_ros_map, ImportLimits};
-use protocol::{Pose2D, SiteId};
+use protocol::{Pose2D, SessionArgs, SiteId};
 
 use crate::bench::{markdown_table, run_bench, BenchOptions};
 use crate::config::ServiceConfig;
@@ -64,12 +64,18 @@ pub struct DemoArgs {
     /// Configuration file (TOML; see planner.example.toml).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Scenario the simulator runs (default: task A's junctions world).
+    /// Scenario the simulator runs (default: task_a.yaml, task A's junctions world, in the
+    /// scenarios folder: $FLEET_SCENARIOS_DIR, ./sim/scenarios, ./scenarios or the user data
+    /// directory).
     #[arg(long)]
     pub scenario: Option<PathBuf>,
     /// Controller per robot, cycled: dynamic-window, path-tracker, dlm, lpe, none.
     #[arg(long, value_delimiter = ',', default_value = "dynamic-window")]
-    pub controllers: Vec<String>,
+    pub controllers: Vec<protocol::ControllerKind>,
+    /// Folder of the dlm/lpe/none models (<controller>.onnx). Default: $FLEET_MODELS_DIR,
+    /// ./models or the user data directory.
+    #[arg(long)]
+    pub models_dir: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]
@@ -83,7 +89,8 @@ pub struct BenchFleetArgs {
     /// Length of the measured run.
     #[arg(long, default_value_t = 20.0)]
     pub duration_s: f64,
-    /// Map (ROS YAML); default: Nav2's 100 m x 100 m map with 15 % obstacles.
+    /// Map (ROS YAML); default: Nav2's 100 m x 100 m map with 15 % obstacles, in
+    /// <shared>/maps/nav2 ($FLEET_SHARED_DIR, ./shared, ../shared or the user data directory).
     #[arg(long)]
     pub map: Option<PathBuf>,
     /// Speed of the simulated robots along their paths.
@@ -117,12 +124,10 @@ pub struct ServeArgs {
     /// Site: Zenoh keys are under fleet/<site>/. Default: `[zenoh] site`.
     #[arg(long)]
     pub site: Option<SiteId>,
-    /// Zenoh endpoint to listen on (repeatable), e.g. tcp/0.0.0.0:7447. Replaces `[zenoh] listen`.
-    #[arg(long = "zenoh-listen")]
-    pub zenoh_listen: Vec<String>,
-    /// Zenoh endpoint to connect to (repeatable). Replaces `[zenoh] connect`.
-    #[arg(long = "zenoh-connect")]
-    pub zenoh_connect: Vec<String>,
+    /// The Zenoh session: `--zenoh-listen` / `--zenoh-connect` replace `[zenoh] listen` /
+    /// `connect`, `--zenoh-multicast-scouting` turns `[zenoh] multicast` on.
+    #[command(flatten)]
+    pub zenoh: SessionArgs,
 }
 
 impl ServeArgs {
@@ -142,12 +147,7 @@ impl ServeArgs {
         if let Some(site) = &self.site {
             config.zenoh.site = site.clone();
         }
-        if !self.zenoh_listen.is_empty() {
-            config.zenoh.listen.clone_from(&self.zenoh_listen);
-        }
-        if !self.zenoh_connect.is_empty() {
-            config.zenoh.connect.clone_from(&self.zenoh_connect);
-        }
+        config.zenoh.override_with(&self.zenoh);
         config
             .validate()
             .map_err(|reason| anyhow::anyhow!("invalid settings: {reason}"))?;
@@ -164,10 +164,10 @@ pub struct PlanArgs {
     #[arg(long)]
     pub map: PathBuf,
     /// Start pose `x,y,yaw` (metres, metres, radians) in the map frame.
-    #[arg(long, value_parser = parse_pose, allow_hyphen_values = true)]
+    #[arg(long, allow_hyphen_values = true)]
     pub start: Pose2D,
     /// Goal pose `x,y,yaw`.
-    #[arg(long, value_parser = parse_pose, allow_hyphen_values = true)]
+    #[arg(long, allow_hyphen_values = true)]
     pub goal: Pose2D,
     /// Configuration file (TOML with `[planner]`, `[dlm]`, `[lpe]`); defaults otherwise.
     #[arg(long)]
@@ -188,7 +188,7 @@ pub struct BenchArgs {
     /// Random start/goal pairs per map.
     #[arg(long, default_value_t = 1000)]
     pub pairs: usize,
-    /// Map YAML files (default: the three Nav2 100by100 maps).
+    /// Map YAML files (default: the three Nav2 100by100 maps in <shared>/maps/nav2).
     #[arg(long, num_args = 1..)]
     pub maps: Vec<PathBuf>,
     /// Write the results as JSON here.
@@ -200,28 +200,6 @@ pub struct BenchArgs {
     /// Configuration file (its `[planner]` table is used).
     #[arg(long)]
     pub config: Option<PathBuf>,
-}
-
-/// Parses `x,y,yaw` (three finite numbers).
-///
-/// # Errors
-/// A message naming the bad part.
-pub fn parse_pose(s: &str) -> Result<Pose2D, String> {
-    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
-    if parts.len() != 3 {
-        return Err(format!(
-            "expected x,y,yaw (metres, metres, radians), got {s:?}"
-        ));
-    }
-    let mut v = [0.0; 3];
-    for ((name, part), out) in ["x", "y", "yaw"].iter().zip(&parts).zip(&mut v) {
-        *out = part
-            .parse::<f64>()
-            .ok()
-            .filter(|x| x.is_finite())
-            .ok_or_else(|| format!("{name} = {part:?} is not a finite number"))?;
-    }
-    Ok(Pose2D::new(v[0], v[1], v[2]))
 }
 
 fn load_config(path: Option<&FsPath>) -> anyhow::Result<ServiceConfig> {
@@ -260,28 +238,29 @@ fn demo(args: DemoArgs, out: &mut dyn Write) -> anyhow::Result<()> {
         token: args.token,
         config: args.config,
         site: None,
-        zenoh_listen: Vec::new(),
-        zenoh_connect: Vec::new(),
+        zenoh: SessionArgs::default(),
     }
     .resolve()?;
     let opts = crate::demo::DemoOptions {
         serve,
         robots: args.robots,
-        scenario: args
-            .scenario
-            .unwrap_or_else(|| crate::demo::scenarios_dir().join("task_a.yaml")),
+        scenario: match args.scenario {
+            Some(s) => s,
+            None => protocol::data_dirs::find_scenarios_dir(None)?.join("task_a.yaml"),
+        },
         controllers: args.controllers,
         bin_dir: None,
+        models_dir: args.models_dir,
     };
     runtime()?.block_on(crate::demo::run(opts, out))
 }
 
 fn bench_fleet(args: &BenchFleetArgs, out: &mut dyn Write) -> anyhow::Result<()> {
     let opts = crate::fleet_bench::FleetBenchOptions {
-        map_yaml: args
-            .map
-            .clone()
-            .unwrap_or_else(|| map_store::paths::nav2_maps_dir().join("100by100_15.yaml")),
+        map_yaml: match &args.map {
+            Some(m) => m.clone(),
+            None => protocol::data_dirs::find_nav2_maps_dir(None)?.join("100by100_15.yaml"),
+        },
         robots: args.robots,
         rate_hz: args.rate_hz,
         duration_s: args.duration_s,
@@ -311,6 +290,8 @@ fn serve(args: &ServeArgs, out: &mut dyn Write) -> anyhow::Result<()> {
         .build()
         .context("cannot start the tokio runtime")?;
     runtime.block_on(async {
+        // Listen for SIGTERM before saying we listen: a supervisor may stop us at once.
+        let stop = StopSignal::install()?;
         let server = Server::start(opts).await?;
         writeln!(out, "listening on {}", server.url())?;
         match server.token_source() {
@@ -329,7 +310,7 @@ fn serve(args: &ServeArgs, out: &mut dyn Write) -> anyhow::Result<()> {
         }
         writeln!(out, "zenoh: {}", server.zenoh_locators().await.join(" "))?;
         out.flush()?;
-        wait_for_stop_signal().await?;
+        stop.wait().await?;
         writeln!(out, "stopping")?;
         out.flush()?;
         server.stop().await?;
@@ -339,20 +320,40 @@ fn serve(args: &ServeArgs, out: &mut dyn Write) -> anyhow::Result<()> {
 
 /// Ctrl-C, or SIGTERM on Unix (what `kill` and process supervisors send).
 pub(crate) async fn wait_for_stop_signal() -> anyhow::Result<()> {
+    StopSignal::install()?.wait().await
+}
+
+/// A stop request (Ctrl-C or SIGTERM) listened for from [`StopSignal::install`] on, so a
+/// signal that arrives before anyone waits is not lost (nor kills the process).
+pub(crate) struct StopSignal {
     #[cfg(unix)]
-    {
-        let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
-            .context("cannot listen for SIGTERM")?;
-        tokio::select! {
-            r = tokio::signal::ctrl_c() => r.context("cannot listen for Ctrl-C")?,
-            _ = term.recv() => {}
-        }
+    term: tokio::signal::unix::Signal,
+}
+
+impl StopSignal {
+    pub(crate) fn install() -> anyhow::Result<Self> {
+        Ok(Self {
+            #[cfg(unix)]
+            term: tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+                .context("cannot listen for SIGTERM")?,
+        })
     }
-    #[cfg(not(unix))]
-    tokio::signal::ctrl_c()
-        .await
-        .context("cannot listen for Ctrl-C")?;
-    Ok(())
+
+    pub(crate) async fn wait(self) -> anyhow::Result<()> {
+        #[cfg(unix)]
+        {
+            let mut term = self.term;
+            tokio::select! {
+                r = tokio::signal::ctrl_c() => r.context("cannot listen for Ctrl-C")?,
+                _ = term.recv() => {}
+            }
+        }
+        #[cfg(not(unix))]
+        tokio::signal::ctrl_c()
+            .await
+            .context("cannot listen for Ctrl-C")?;
+        Ok(())
+    }
 }
 
 fn plan(args: &PlanArgs, out: &mut dyn Write) -> anyhow::Result<()> {
@@ -409,10 +410,11 @@ fn plan(args: &PlanArgs, out: &mut dyn Write) -> anyhow::Result<()> {
 
 fn bench(args: &BenchArgs, out: &mut dyn Write) -> anyhow::Result<()> {
     let cfg = load_config(args.config.as_deref())?;
-    let mut opts = BenchOptions::nav2_default();
-    if !args.maps.is_empty() {
-        opts.maps.clone_from(&args.maps);
-    }
+    let mut opts = if args.maps.is_empty() {
+        BenchOptions::nav2_default(&protocol::data_dirs::find_nav2_maps_dir(None)?)
+    } else {
+        BenchOptions::with_maps(args.maps.clone())
+    };
     opts.pairs = args.pairs;
     opts.seed = args.seed;
     opts.config = cfg.planner;
@@ -442,13 +444,73 @@ fn bench(args: &BenchArgs, out: &mut dyn Write) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use clap::CommandFactory;
 
     #[test]
     fn poses_parse_and_errors_name_the_part() {
-        let p = parse_pose("1.5,-2,0.3").unwrap();
-        assert_eq!(p, Pose2D::new(1.5, -2.0, 0.3));
-        assert!(parse_pose("1,2").unwrap_err().contains("x,y,yaw"));
-        assert!(parse_pose("1,nan,0").unwrap_err().contains("y"));
-        assert!(parse_pose("1,2,abc").unwrap_err().contains("yaw"));
+        let plan = |start: &str| {
+            Cli::try_parse_from([
+                "planner-service",
+                "plan",
+                "--map",
+                "m.yaml",
+                "--start",
+                start,
+                "--goal",
+                "1,1,0",
+            ])
+            .map(|cli| match cli.command {
+                Command::Plan(args) => args.start,
+                _ => unreachable!("parsed a plan command"),
+            })
+            .map_err(|e| e.to_string())
+        };
+        assert_eq!(plan("1.5,-2,0.3").unwrap(), Pose2D::new(1.5, -2.0, 0.3));
+        assert_eq!(plan("-1.5,-2,0.3").unwrap(), Pose2D::new(-1.5, -2.0, 0.3));
+        let e = plan("1,2").unwrap_err();
+        assert!(e.contains("--start") && e.contains("x,y,yaw"), "{e}");
+        assert!(plan("1,nan,0").unwrap_err().contains("y = \"nan\""));
+        assert!(plan("1,2,abc").unwrap_err().contains("yaw = \"abc\""));
+    }
+
+    #[test]
+    fn serve_takes_the_shared_zenoh_flags() {
+        Cli::command().debug_assert();
+        let cli = Cli::try_parse_from([
+            "planner-service",
+            "serve",
+            "--data-dir",
+            "/tmp/d",
+            "--listen",
+            "127.0.0.1:0",
+            "--zenoh-listen",
+            "tcp/127.0.0.1:0",
+            "--zenoh-connect",
+            "tcp/10.0.0.2:7447",
+            "--zenoh-multicast-scouting",
+        ])
+        .unwrap();
+        let Command::Serve(args) = cli.command else {
+            unreachable!("parsed a serve command")
+        };
+        assert_eq!(args.listen, Some(SocketAddr::from(([127, 0, 0, 1], 0))));
+        let opts = args.resolve().unwrap();
+        assert_eq!(opts.config.zenoh.listen, ["tcp/127.0.0.1:0"]);
+        assert_eq!(opts.config.zenoh.connect, ["tcp/10.0.0.2:7447"]);
+        assert!(opts.config.zenoh.multicast);
+        let bad = Cli::try_parse_from([
+            "planner-service",
+            "serve",
+            "--data-dir",
+            "/tmp/d",
+            "--zenoh-connect",
+            "nonsense",
+        ])
+        .unwrap();
+        let Command::Serve(args) = bad.command else {
+            unreachable!("parsed a serve command")
+        };
+        let e = format!("{:#}", args.resolve().unwrap_err());
+        assert!(e.contains("connect") && e.contains("nonsense"), "{e}");
     }
 }

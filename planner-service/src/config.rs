@@ -9,12 +9,13 @@ use std::net::SocketAddr;
 use std::path::Path;
 
 use map_store::ImportLimits;
-use protocol::SiteId;
 use serde::{Deserialize, Serialize};
 
 use crate::fleet::FleetConfig;
+use planning::intention::dlm::DlmParamsError;
 use planning::intention::{DlmParams, LpeParams};
-use planning::PlannerConfig;
+use planning::{PlanError, PlannerConfig};
+use protocol::{LpeParamsError, SessionArgs, SessionError, SiteId};
 
 /// The whole configuration file.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -66,24 +67,40 @@ impl Default for HttpConfig {
 /// Shortest token accepted: anything shorter is guessable.
 pub const MIN_TOKEN_LEN: usize = 16;
 
+/// A value of the `[http]` table out of range.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum HttpConfigError {
+    #[error("invalid {field} = {value_bytes}: must be positive and fit in memory")]
+    BodyLimit {
+        /// `http.max_upload_bytes` or `http.max_json_bytes`.
+        field: &'static str,
+        value_bytes: u64,
+    },
+    /// The token itself is not repeated: it is a secret.
+    #[error("invalid http.token: {0}")]
+    Token(#[source] TokenRejection),
+    #[error(
+        "invalid http.cors entry {origin:?}: expected \"*\" or an origin like \"http://host:port\""
+    )]
+    CorsOrigin { origin: String },
+}
+
 impl HttpConfig {
     /// Checks limits, token and CORS origins.
     ///
     /// # Errors
-    /// A message naming the field and value.
-    pub fn validate(&self) -> Result<(), String> {
-        for (field, v) in [
+    /// [`HttpConfigError`] naming the field and value (never the token's value).
+    pub fn validate(&self) -> Result<(), HttpConfigError> {
+        for (field, value_bytes) in [
             ("http.max_upload_bytes", self.max_upload_bytes),
             ("http.max_json_bytes", self.max_json_bytes),
         ] {
-            if v == 0 || usize::try_from(v).is_err() {
-                return Err(format!(
-                    "invalid {field} = {v}: must be positive and fit in memory"
-                ));
+            if value_bytes == 0 || usize::try_from(value_bytes).is_err() {
+                return Err(HttpConfigError::BodyLimit { field, value_bytes });
             }
         }
         if let Some(token) = &self.token {
-            validate_token(token).map_err(|reason| format!("invalid http.token: {reason}"))?;
+            validate_token(token).map_err(HttpConfigError::Token)?;
         }
         for origin in &self.cors {
             let host = origin
@@ -94,28 +111,34 @@ impl HttpConfig {
                     !h.is_empty() && h.chars().all(|c| c.is_ascii_graphic() && c != '/')
                 });
             if !ok {
-                return Err(format!(
-                    "invalid http.cors entry {origin:?}: expected \"*\" or an origin like \"http://host:port\""
-                ));
+                return Err(HttpConfigError::CorsOrigin {
+                    origin: origin.clone(),
+                });
             }
         }
         Ok(())
     }
 }
 
+/// Why a bearer token is refused; never repeats the token (it is a secret).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum TokenRejection {
+    #[error("length {len} is outside {MIN_TOKEN_LEN}..=256 characters")]
+    Length { len: usize },
+    #[error("only visible ASCII characters are allowed (no spaces)")]
+    NotVisibleAscii,
+}
+
 /// Checks a bearer token: at least [`MIN_TOKEN_LEN`] visible ASCII characters, at most 256.
 ///
 /// # Errors
-/// A reason that does not repeat the token (it is a secret).
-pub fn validate_token(token: &str) -> Result<(), String> {
+/// [`TokenRejection`], which does not repeat the token.
+pub fn validate_token(token: &str) -> Result<(), TokenRejection> {
     if token.len() < MIN_TOKEN_LEN || token.len() > 256 {
-        return Err(format!(
-            "length {} is outside {MIN_TOKEN_LEN}..=256 characters",
-            token.len()
-        ));
+        return Err(TokenRejection::Length { len: token.len() });
     }
     if !token.chars().all(|c| c.is_ascii_graphic()) {
-        return Err("only visible ASCII characters are allowed (no spaces)".into());
+        return Err(TokenRejection::NotVisibleAscii);
     }
     Ok(())
 }
@@ -155,18 +178,31 @@ fn default_site() -> SiteId {
 }
 
 impl ZenohConfig {
+    /// The session part of the table (`listen`, `connect`, `multicast`).
+    #[must_use]
+    pub fn session_args(&self) -> SessionArgs {
+        SessionArgs {
+            listen: self.listen.clone(),
+            connect: self.connect.clone(),
+            multicast_scouting: self.multicast,
+        }
+    }
+
+    /// Lays the `--zenoh-*` flags over the table (see [`SessionArgs::override_with`]).
+    pub fn override_with(&mut self, flags: &SessionArgs) {
+        let mut session = self.session_args();
+        session.override_with(flags);
+        self.listen = session.listen;
+        self.connect = session.connect;
+        self.multicast = session.multicast_scouting;
+    }
+
     /// The Zenoh configuration of the service's peer session.
     ///
     /// # Errors
-    /// A message naming the endpoint list Zenoh refused.
-    pub fn session_config(&self) -> Result<zenoh::Config, String> {
-        let mut c = protocol::zenoh_io::peer_config(&self.listen, &self.connect)
-            .map_err(|e| e.to_string())?;
-        if self.multicast {
-            c.insert_json5("scouting/multicast/enabled", "true")
-                .map_err(|e| format!("invalid zenoh.multicast = true: {e}"))?;
-        }
-        Ok(c)
+    /// [`SessionError`] naming the endpoint Zenoh refused.
+    pub fn session_config(&self) -> Result<zenoh::Config, SessionError> {
+        self.session_args().config()
     }
 }
 
@@ -181,8 +217,31 @@ pub enum ConfigError {
     },
     #[error("cannot parse config {path}: {reason}")]
     Parse { path: String, reason: String },
-    #[error("invalid config {path}: {reason}")]
-    Invalid { path: String, reason: String },
+    #[error("invalid config {path}: {source}")]
+    Invalid {
+        path: String,
+        #[source]
+        source: ServiceConfigError,
+    },
+}
+
+/// A table of the configuration with a value out of range; the message names the field and
+/// value.
+#[derive(Debug, thiserror::Error)]
+pub enum ServiceConfigError {
+    #[error(transparent)]
+    Planner(#[from] PlanError),
+    #[error(transparent)]
+    Dlm(#[from] DlmParamsError),
+    #[error(transparent)]
+    Lpe(#[from] LpeParamsError),
+    #[error(transparent)]
+    Http(#[from] HttpConfigError),
+    #[error(transparent)]
+    Zenoh(#[from] SessionError),
+    /// `[fleet]`, as the fleet core words it.
+    #[error("{0}")]
+    Fleet(#[from] crate::fleet::InvalidFleetConfig),
 }
 
 impl ServiceConfig {
@@ -209,9 +268,9 @@ impl ServiceConfig {
             path: origin.to_string(),
             reason: e.to_string(),
         })?;
-        cfg.validate().map_err(|reason| ConfigError::Invalid {
+        cfg.validate().map_err(|source| ConfigError::Invalid {
             path: origin.to_string(),
-            reason,
+            source,
         })?;
         Ok(cfg)
     }
@@ -231,11 +290,11 @@ impl ServiceConfig {
     /// Checks every table.
     ///
     /// # Errors
-    /// A message naming the field and value.
-    pub fn validate(&self) -> Result<(), String> {
-        self.planner.validate().map_err(|e| e.to_string())?;
+    /// [`ServiceConfigError`] naming the field and value.
+    pub fn validate(&self) -> Result<(), ServiceConfigError> {
+        self.planner.validate()?;
         self.dlm.validate()?;
-        self.lpe.validate().map_err(|e| e.to_string())?;
+        self.lpe.validate()?;
         self.http.validate()?;
         self.zenoh.session_config()?;
         self.fleet.validate()?;
@@ -276,11 +335,90 @@ mod tests {
         let err =
             ServiceConfig::from_toml_str("[zenoh]\nlisten = [\"nonsense\"]\n", "t").unwrap_err();
         assert!(err.to_string().contains("nonsense"), "{err}");
+        let err = ServiceConfig::from_toml_str(
+            "[zenoh]\nconnect = [\"tcp/10.0.0.2:7447\", \"bogus\"]\n",
+            "t",
+        )
+        .unwrap_err();
+        assert!(
+            err.to_string().contains("connect") && err.to_string().contains("bogus"),
+            "{err}"
+        );
         let ok = ServiceConfig::from_toml_str(
             "[http]\ncors = [\"*\", \"http://localhost:3000\"]\nprotect_reads = true\n",
             "t",
         )
         .unwrap();
         assert!(ok.http.protect_reads);
+    }
+
+    #[test]
+    fn typed_errors_name_field_and_value() {
+        let invalid = |text: &str| match ServiceConfig::from_toml_str(text, "t.toml") {
+            Err(ConfigError::Invalid { path, source }) => {
+                assert_eq!(path, "t.toml");
+                source
+            }
+            other => panic!("expected ConfigError::Invalid, got {other:?}"),
+        };
+        let e = invalid("[dlm]\nwindow_m = 0.0\n");
+        assert!(
+            matches!(&e, ServiceConfigError::Dlm(d) if d.field == "window_m" && d.value == 0.0),
+            "{e:?}"
+        );
+        assert_eq!(e.to_string(), "invalid dlm.window_m = 0: must be positive");
+        let e = invalid("[http]\nmax_json_bytes = 0\n");
+        assert!(matches!(
+            e,
+            ServiceConfigError::Http(HttpConfigError::BodyLimit {
+                field: "http.max_json_bytes",
+                value_bytes: 0
+            })
+        ));
+        assert_eq!(
+            e.to_string(),
+            "invalid http.max_json_bytes = 0: must be positive and fit in memory"
+        );
+        let e = invalid("[http]\ntoken = \"has spaces but is long\"\n");
+        assert!(matches!(
+            e,
+            ServiceConfigError::Http(HttpConfigError::Token(TokenRejection::NotVisibleAscii))
+        ));
+        assert!(
+            !e.to_string().contains("has spaces"),
+            "the token is a secret: {e}"
+        );
+        let e = invalid("[http]\ncors = [\"ftp://x\"]\n");
+        assert!(e.to_string().contains("http.cors") && e.to_string().contains("ftp://x"));
+        let e = invalid("[zenoh]\nlisten = [\"nonsense\"]\n");
+        assert!(
+            matches!(&e, ServiceConfigError::Zenoh(SessionError::Endpoint { field: "listen", endpoint, .. }) if endpoint == "nonsense"),
+            "{e:?}"
+        );
+        let e = invalid("[planner]\nstep_m = -1.0\n");
+        assert!(matches!(e, ServiceConfigError::Planner(_)));
+        assert!(e.to_string().contains("step_m = -1"), "{e}");
+        assert_eq!(
+            validate_token("short"),
+            Err(TokenRejection::Length { len: 5 })
+        );
+    }
+
+    #[test]
+    fn zenoh_flags_override_the_table() {
+        let mut zenoh = ZenohConfig {
+            listen: vec!["tcp/0.0.0.0:7447".into()],
+            ..ZenohConfig::default()
+        };
+        assert!(!zenoh.session_args().multicast_scouting);
+        zenoh.override_with(&SessionArgs {
+            listen: vec![],
+            connect: vec!["tcp/10.0.0.2:7447".into()],
+            multicast_scouting: true,
+        });
+        assert_eq!(zenoh.listen, ["tcp/0.0.0.0:7447"]);
+        assert_eq!(zenoh.connect, ["tcp/10.0.0.2:7447"]);
+        assert!(zenoh.multicast);
+        zenoh.session_config().unwrap();
     }
 }

@@ -1,23 +1,25 @@
 //! The fleet demo (`planner-service demo`): the whole system on one machine.
 //!
 //! In this process: the planner service (HTTP API + dashboard, map server, fleet core) on an
-//! embedded store with the shipped floor plans preloaded. As separate processes talking to it
-//! over Zenoh on loopback: the simulator with N robots and one `robot-agent` per robot. It
-//! prints the dashboard URL and the token and runs until Ctrl-C or SIGTERM, then stops the
-//! agents, the simulator and the service, in that order.
+//! embedded store with the scenario's floor plans (and the Nav2 reference maps when the shared
+//! folder is found) preloaded. As separate processes talking to it over Zenoh on loopback, started
+//! by [`crate::launch`]: the simulator with N robots and one `robot-agent` per robot. It prints the
+//! dashboard URL and the token and runs until Ctrl-C or SIGTERM, then stops the agents, the
+//! simulator and the service, in that order.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::Stdio;
 use std::time::Duration;
 
 use anyhow::{bail, Context};
 use map_store::{import_into, ImportLimits, MapStore};
-use protocol::{MapName, Pose2D};
-use tokio::io::{AsyncBufReadExt, BufReader};
-use tokio::process::{Child, Command};
+use protocol::{ControllerKind, MapName};
 
 use crate::http::{ServeOptions, Server};
+use crate::launch::{Robots, RobotsSpec};
+
+/// How long each group of children (agents, then the simulator) gets to stop after SIGTERM.
+const STOP_GRACE: Duration = Duration::from_secs(5);
 
 /// What to start.
 #[derive(Debug, Clone)]
@@ -27,35 +29,28 @@ pub struct DemoOptions {
     /// Scenario the simulator runs (its floor plan is the robots' map).
     pub scenario: PathBuf,
     /// Controller of each robot, cycled when fewer than robots are given.
-    pub controllers: Vec<String>,
+    pub controllers: Vec<ControllerKind>,
     /// Folder holding `sim` and `robot-agent` (default: next to this executable).
     pub bin_dir: Option<PathBuf>,
+    /// Folder of the network controllers' models (default: looked up, see
+    /// [`protocol::data_dirs`]).
+    pub models_dir: Option<PathBuf>,
 }
 
-/// The shipped scenarios (`sim/scenarios` in the source tree, or `FLEET_SCENARIOS_DIR`).
-#[must_use]
-pub fn scenarios_dir() -> PathBuf {
-    std::env::var_os("FLEET_SCENARIOS_DIR").map_or_else(
-        || Path::new(env!("CARGO_MANIFEST_DIR")).join("../sim/scenarios"),
-        PathBuf::from,
-    )
-}
-
-/// Imports every floor plan of the shipped scenarios (`<scenarios>/maps/*.yaml`, named after
-/// the file) and the Nav2 reference maps when the shared folder is there. Identical content is
-/// not stored twice, so a restart imports nothing new.
+/// Imports `first` and then every ROS floor plan (`*.yaml`) in `dirs`, each named after its
+/// file; a name already imported is skipped and a missing folder is skipped. Identical content
+/// is not stored twice, so a restart imports nothing new.
 ///
 /// # Errors
 /// A plan that cannot be read or stored.
-pub fn preload_maps(store: &MapStore) -> anyhow::Result<Vec<MapName>> {
+pub fn preload_maps(
+    store: &MapStore,
+    first: &Path,
+    dirs: &[PathBuf],
+) -> anyhow::Result<Vec<MapName>> {
     let mut files: Vec<PathBuf> = Vec::new();
-    // The Nav2 reference maps when `shared/` is there (a missing folder is skipped).
-    let dirs = [
-        scenarios_dir().join("maps"),
-        map_store::paths::nav2_maps_dir(),
-    ];
     for dir in dirs {
-        let Ok(entries) = std::fs::read_dir(&dir) else {
+        let Ok(entries) = std::fs::read_dir(dir) else {
             continue;
         };
         for e in entries.flatten() {
@@ -66,6 +61,7 @@ pub fn preload_maps(store: &MapStore) -> anyhow::Result<Vec<MapName>> {
         }
     }
     files.sort();
+    files.insert(0, first.to_path_buf());
     let mut names = Vec::new();
     for f in files {
         let name = map_store::import::name_from_path(&f)?;
@@ -79,54 +75,28 @@ pub fn preload_maps(store: &MapStore) -> anyhow::Result<Vec<MapName>> {
     Ok(names)
 }
 
-/// The floor-plan name of a scenario: the stem of its `floor_plan` file.
-fn scenario_plan(scenario: &Path) -> anyhow::Result<MapName> {
-    let text = std::fs::read_to_string(scenario)
-        .with_context(|| format!("cannot read scenario {}", scenario.display()))?;
-    let plan = text
-        .lines()
-        .find_map(|l| l.strip_prefix("floor_plan:"))
-        .map(|v| v.trim().trim_matches(['\'', '"']).to_string())
-        .with_context(|| format!("scenario {} names no floor_plan", scenario.display()))?;
-    Ok(map_store::import::name_from_path(Path::new(&plan))?)
-}
-
-fn bin(dir: &Path, name: &str) -> anyhow::Result<PathBuf> {
-    let p = dir.join(format!("{name}{}", std::env::consts::EXE_SUFFIX));
-    if !p.is_file() {
-        bail!(
-            "cannot find {} (build it: cargo build --release -p {})",
-            p.display(),
-            name
-        );
-    }
-    Ok(p)
-}
-
-fn model_for(controller: &str) -> Option<PathBuf> {
-    let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
-    let file = match controller {
-        "dlm" => "dlm.onnx",
-        "lpe" => "lpe.onnx",
-        "none" => "none.onnx",
-        _ => return None,
-    };
-    Some(models.join(file))
+/// The floor plan of a scenario (resolved against the scenario's folder) and its map name, the
+/// plan's file stem.
+fn scenario_plan(scenario: &Path) -> anyhow::Result<(PathBuf, MapName)> {
+    let parsed = sim::Scenario::load(scenario)?;
+    let plan = parsed.floor_plan_path(scenario);
+    let name = map_store::import::name_from_path(&plan)?;
+    Ok((plan, name))
 }
 
 /// A started demo; [`Demo::stop`] ends it.
 pub struct Demo {
     pub server: Server,
     pub map: MapName,
-    children: Vec<(String, Child)>,
+    robots: Option<Robots>,
 }
 
 impl Demo {
     /// Starts the service, the simulator and the agents.
     ///
     /// # Errors
-    /// A missing binary or scenario, a service that cannot start, a child that cannot spawn or
-    /// a simulator that does not report its robots.
+    /// A missing binary, model or scenario, a service that cannot start, a child that cannot
+    /// spawn or a simulator that does not report its robots.
     pub async fn start(opts: DemoOptions) -> anyhow::Result<Self> {
         if opts.robots == 0 {
             bail!("invalid --robots 0: need at least one robot");
@@ -138,14 +108,22 @@ impl Demo {
                 .map(Path::to_path_buf)
                 .context("executable has no folder")?,
         };
-        let sim_bin = bin(&bin_dir, "sim")?;
-        let agent_bin = bin(&bin_dir, "robot-agent")?;
-        let map = scenario_plan(&opts.scenario)?;
+        // Binaries and models are checked before the service starts.
+        crate::launch::binary(&bin_dir, "sim")?;
+        crate::launch::binary(&bin_dir, "robot-agent")?;
+        let (plan, map) = scenario_plan(&opts.scenario)?;
         {
             let maps_dir = opts.serve.data_dir.join("maps");
+            // The scenario's plan and its siblings (the shipped floor plans), and the Nav2
+            // reference maps when the shared folder is found.
+            let mut dirs: Vec<PathBuf> = plan.parent().map(Path::to_path_buf).into_iter().collect();
+            match protocol::data_dirs::find_nav2_maps_dir(None) {
+                Ok(nav2) => dirs.push(nav2),
+                Err(e) => tracing::info!("not preloading the Nav2 reference maps: {e}"),
+            }
             let names = tokio::task::spawn_blocking(move || {
                 let store = MapStore::open(&maps_dir)?;
-                preload_maps(&store)
+                preload_maps(&store, &plan, &dirs)
             })
             .await??;
             tracing::info!(maps = names.len(), "floor plans preloaded");
@@ -162,159 +140,57 @@ impl Demo {
             .into_iter()
             .filter(|l| l.starts_with("tcp/"))
             .collect();
-        if endpoints.is_empty() {
-            bail!("the service listens on no tcp endpoint for the robots");
-        }
         let mut demo = Self {
             server,
             map,
-            children: Vec::new(),
+            robots: None,
         };
-        match demo
-            .spawn_children(&opts, &sim_bin, &agent_bin, &endpoints, site.as_str())
-            .await
-        {
-            Ok(()) => Ok(demo),
+        if endpoints.is_empty() {
+            demo.stop().await;
+            bail!("the service listens on no tcp endpoint for the robots");
+        }
+        let spec = RobotsSpec {
+            bin_dir,
+            scenario: opts.scenario.clone(),
+            robots: opts.robots,
+            site,
+            connect: endpoints,
+            map: demo.map.clone(),
+            controllers: opts.controllers.clone(),
+            models_dir: opts.models_dir.clone(),
+            roster_timeout: Duration::from_secs(60),
+        };
+        match tokio::task::spawn_blocking(move || Robots::start(&spec)).await {
+            Ok(Ok(robots)) => {
+                demo.robots = Some(robots);
+                Ok(demo)
+            }
+            Ok(Err(e)) => {
+                demo.stop().await;
+                Err(e.into())
+            }
             Err(e) => {
                 demo.stop().await;
-                Err(e)
+                Err(anyhow::anyhow!("the launcher panicked: {e}"))
             }
         }
-    }
-
-    async fn spawn_children(
-        &mut self,
-        opts: &DemoOptions,
-        sim_bin: &Path,
-        agent_bin: &Path,
-        endpoints: &[String],
-        site: &str,
-    ) -> anyhow::Result<()> {
-        let mut sim = Command::new(sim_bin);
-        sim.arg("run")
-            .arg("--scenario")
-            .arg(&opts.scenario)
-            .arg("--robots")
-            .arg(opts.robots.to_string())
-            .arg("--site")
-            .arg(site)
-            .stdout(Stdio::piped())
-            .kill_on_drop(true);
-        for e in endpoints {
-            sim.arg("--connect").arg(e);
-        }
-        let mut sim = sim
-            .spawn()
-            .with_context(|| format!("cannot start {}", sim_bin.display()))?;
-        let stdout = sim.stdout.take().context("simulator stdout")?;
-        self.children.push(("sim".to_string(), sim));
-        let mut lines = BufReader::new(stdout).lines();
-        let mut robots: Vec<(String, Pose2D)> = Vec::new();
-        while robots.len() < opts.robots {
-            let line = tokio::time::timeout(Duration::from_secs(60), lines.next_line())
-                .await
-                .context("the simulator did not report its robots within 60 s")??
-                .context("the simulator exited before reporting its robots")?;
-            if let Some((id, pose)) = parse_robot_line(&line) {
-                robots.push((id, pose));
-            }
-        }
-        // Keep draining the simulator's stdout so it never blocks on a full pipe.
-        tokio::spawn(async move {
-            while let Ok(Some(line)) = lines.next_line().await {
-                tracing::debug!(target: "sim", "{line}");
-            }
-        });
-        let controllers = if opts.controllers.is_empty() {
-            vec!["dynamic-window".to_string()]
-        } else {
-            opts.controllers.clone()
-        };
-        for (i, (id, pose)) in robots.iter().enumerate() {
-            let controller = &controllers[i % controllers.len()];
-            let mut agent = Command::new(agent_bin);
-            agent
-                .arg("--robot-id")
-                .arg(id)
-                .arg("--site")
-                .arg(site)
-                .arg("--controller")
-                .arg(controller)
-                .arg("--map")
-                .arg(self.map.as_str())
-                .arg("--initial-pose")
-                .arg(format!("{},{},{}", pose.x_m, pose.y_m, pose.yaw_rad))
-                .arg("--no-multicast")
-                .kill_on_drop(true);
-            if let Some(model) = model_for(controller) {
-                agent.arg("--model").arg(model);
-            }
-            for e in endpoints {
-                agent.arg("--connect").arg(e);
-            }
-            let child = agent
-                .spawn()
-                .with_context(|| format!("cannot start {} for {id}", agent_bin.display()))?;
-            self.children.push((format!("agent {id}"), child));
-        }
-        Ok(())
     }
 
     /// The first child that exited, if any (name and status).
     pub fn exited_child(&mut self) -> Option<String> {
-        for (name, child) in &mut self.children {
-            if let Ok(Some(status)) = child.try_wait() {
-                return Some(format!("{name} exited ({status})"));
-            }
-        }
-        None
+        self.robots.as_mut().and_then(Robots::exited)
     }
 
     /// Stops the agents, then the simulator (SIGTERM, then SIGKILL after 5 s), then the service.
     pub async fn stop(mut self) {
-        let children = std::mem::take(&mut self.children);
-        for (name, mut child) in children.into_iter().rev() {
-            terminate(&name, &mut child).await;
+        if let Some(robots) = self.robots.take() {
+            if let Err(e) = tokio::task::spawn_blocking(move || robots.stop(STOP_GRACE)).await {
+                tracing::warn!("stopping the robots failed: {e}");
+            }
         }
         if let Err(e) = self.server.stop().await {
             tracing::warn!("service did not stop cleanly: {e}");
         }
-    }
-}
-
-fn parse_robot_line(line: &str) -> Option<(String, Pose2D)> {
-    let rest = line.strip_prefix("robot ")?;
-    let (id, pose) = rest.split_once(" at ")?;
-    let v: Vec<f64> = pose
-        .split(',')
-        .map(|x| x.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .ok()?;
-    match v.as_slice() {
-        [x, y, yaw] => Some((id.to_string(), Pose2D::new(*x, *y, *yaw))),
-        _ => None,
-    }
-}
-
-async fn terminate(name: &str, child: &mut Child) {
-    if let Some(pid) = child.id() {
-        // SIGTERM lets an agent send a last zero velocity; std has no portable way to send it.
-        let sent = Command::new("kill")
-            .arg("-TERM")
-            .arg(pid.to_string())
-            .status()
-            .await
-            .is_ok_and(|s| s.success());
-        if sent
-            && tokio::time::timeout(Duration::from_secs(5), child.wait())
-                .await
-                .is_ok()
-        {
-            return;
-        }
-    }
-    if let Err(e) = child.kill().await {
-        tracing::warn!("cannot stop {name}: {e}");
     }
 }
 
@@ -365,28 +241,29 @@ mod tests {
     use super::*;
 
     #[test]
-    fn robot_lines_parse_and_others_do_not() {
-        let (id, p) = parse_robot_line("robot robot_2 at 1.500,-2.250,1.2500").unwrap();
-        assert_eq!(id, "robot_2");
-        assert_eq!((p.x_m, p.y_m, p.yaw_rad), (1.5, -2.25, 1.25));
-        assert!(parse_robot_line("sim driver running").is_none());
-        assert!(parse_robot_line("robot r at 1,2").is_none());
-    }
-
-    #[test]
     fn scenario_plans_are_named_after_their_file() {
-        let s = scenarios_dir().join("task_a.yaml");
-        assert_eq!(scenario_plan(&s).unwrap().as_str(), "junctions");
+        let s = test_support::scenario("task_a");
+        let (plan, name) = scenario_plan(&s).unwrap();
+        assert_eq!(name.as_str(), "junctions");
+        assert_eq!(
+            plan,
+            test_support::scenarios_dir().join("maps/junctions.yaml")
+        );
     }
 
     #[test]
     fn preloading_twice_stores_each_plan_once() {
         let dir = tempfile::tempdir().unwrap();
         let store = MapStore::open(dir.path()).unwrap();
-        let first = preload_maps(&store).unwrap();
-        assert!(first.iter().any(|n| n.as_str() == "junctions"));
+        let maps = test_support::scenarios_dir().join("maps");
+        let plan = maps.join("junctions.yaml");
+        let dirs = [maps, dir.path().join("missing")];
+        let first = preload_maps(&store, &plan, &dirs).unwrap();
+        assert_eq!(first.first().map(MapName::as_str), Some("junctions"));
+        assert!(first.len() > 1, "{first:?}");
         let listed = store.list().unwrap().len();
-        preload_maps(&store).unwrap();
+        assert_eq!(listed, first.len());
+        preload_maps(&store, &plan, &dirs).unwrap();
         assert_eq!(store.list().unwrap().len(), listed);
         assert!(store.list().unwrap().iter().all(|m| m.version == 1));
     }

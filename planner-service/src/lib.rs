@@ -6,8 +6,9 @@
 //! - [`fleet`]: robot registry, delivery tasks (redb) and the per-robot replanning loop over
 //!   Zenoh.
 //! - [`http`]: the HTTP API (docs/api.md) and the running service behind `serve`.
-//! - [`demo`]: the fleet demo (service + simulator + agents as processes); [`fleet_bench`]:
-//!   the replanning-loop benchmark.
+//! - [`demo`]: the fleet demo (service + simulator + agents as processes); [`launch`]: the
+//!   launcher of the simulator and the agents that the demo and the end-to-end tests share;
+//!   [`fleet_bench`]: the replanning-loop benchmark.
 //! - [`cli`], [`bench`]: the `planner-service` command line and its planner benchmark.
 
 pub mod bench;
@@ -17,3 +18,4 @@ pub mod demo;
 pub mod fleet;
 pub mod fleet_bench;
 pub mod http;
+pub mod launch;

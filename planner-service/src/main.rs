@@ -5,10 +5,11 @@ use std::process::ExitCode;
 use clap::Parser;
 
 fn main() -> ExitCode {
-    tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
-        .with_writer(std::io::stderr)
-        .init();
+    // Errors only unless RUST_LOG says otherwise (what `EnvFilter::from_default_env` gave).
+    if let Err(e) = protocol::telemetry::init_tracing("error") {
+        eprintln!("error: {e}");
+        return ExitCode::FAILURE;
+    }
     let cli = planner_service::cli::Cli::parse();
     match planner_service::cli::run(cli, &mut std::io::stdout().lock()) {
         Ok(()) => ExitCode::SUCCESS,

@@ -2,6 +2,10 @@
 
 use std::fmt;
 
+use protocol::LpeParamsError;
+
+use crate::intention::dlm::DlmParamsError;
+
 /// Which end of a planning query an error is about.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Endpoint {
@@ -15,6 +19,27 @@ impl fmt::Display for Endpoint {
             Endpoint::Start => "start",
             Endpoint::Goal => "goal",
         })
+    }
+}
+
+/// DLM or LPE parameters out of range: which table, field and value.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum IntentionParamsError {
+    #[error(transparent)]
+    Dlm(#[from] DlmParamsError),
+    #[error(transparent)]
+    Lpe(#[from] LpeParamsError),
+}
+
+impl From<DlmParamsError> for PlanError {
+    fn from(e: DlmParamsError) -> Self {
+        Self::InvalidParams(e.into())
+    }
+}
+
+impl From<LpeParamsError> for PlanError {
+    fn from(e: LpeParamsError) -> Self {
+        Self::InvalidParams(e.into())
     }
 }
 
@@ -78,8 +103,8 @@ pub enum PlanError {
     },
 
     /// DLM or LPE parameters out of range (the message names the field and value).
-    #[error("invalid intention parameters: {0}")]
-    InvalidParams(String),
+    #[error(transparent)]
+    InvalidParams(#[from] IntentionParamsError),
 
     /// The planning map was built for a different robot radius than the planner's.
     #[error("planning map is inflated for robot radius {map_m} m but the planner is configured for {config_m} m")]
@@ -111,5 +136,32 @@ impl PlanError {
             } => Some(*states_expanded),
             _ => None,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn intention_params_errors_stay_typed_and_name_the_field() {
+        let e: PlanError = DlmParamsError {
+            field: "window_m",
+            value: 0.0,
+            reason: "must be positive",
+        }
+        .into();
+        assert!(
+            matches!(&e, PlanError::InvalidParams(IntentionParamsError::Dlm(d)) if d.field == "window_m"),
+            "{e:?}"
+        );
+        assert_eq!(e.to_string(), "invalid dlm.window_m = 0: must be positive");
+        let e: PlanError = LpeParamsError {
+            field: "size_px",
+            value: "3".into(),
+            reason: "must be in 8..=4096",
+        }
+        .into();
+        assert!(e.to_string().contains("lpe.size_px = 3"), "{e}");
     }
 }

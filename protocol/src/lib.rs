@@ -4,7 +4,8 @@
 //! Zenoh through this crate only: ids are validated newtypes ([`ids`]), messages are plain serde
 //! data with unit-suffixed fields ([`messages`]), key expressions are built and parsed in one
 //! place ([`keys`]) and payloads go through one encode/decode pair with a wire version
-//! ([`codec`], Zenoh glue in [`zenoh_io`]).
+//! ([`codec`], Zenoh glue in [`zenoh_io`]). [`data_dirs`] is where every binary finds its data
+//! folders (scenarios, models, the shared reference maps) at run time.
 //!
 //! # Key expressions
 //!
@@ -63,10 +64,13 @@
 //! streamed message has a [`Header`] with a sequence number and a monotonic ns stamp.
 
 pub mod codec;
+pub mod data_dirs;
 pub mod ids;
 pub mod keys;
 pub mod lpe;
 pub mod messages;
+#[cfg(feature = "cli")]
+pub mod telemetry;
 pub mod zenoh_io;
 
 pub use codec::{decode, encode, DecodeError, EncodeError, WireMessage, WIRE_VERSION};
@@ -76,9 +80,10 @@ pub use lpe::{LpeParams, LpeParamsError};
 pub use messages::{
     normalize_angle, AgentState, AgentStatus, CameraFrame, CmdVel, ControllerKind, Dlm, Header,
     Image, ImageEncoding, Intention, LaserScan, MapGrid, MapMeta, MapRef, Odometry, Pose2D,
-    PoseEstimate, StopReason, TaskEvent, TaskState, UnknownController, ValidationError,
-    UNKNOWN_CELL,
+    PoseEstimate, PoseParseError, StopReason, TaskEvent, TaskState, UnknownController,
+    ValidationError, UNKNOWN_CELL,
 };
 pub use zenoh_io::{
-    decode_sample, encoding_for, loopback_pair, peer_config, PublishError, SessionError,
+    decode_sample, encoding_for, loopback_pair, peer_config, PublishError, SessionArgs,
+    SessionError,
 };

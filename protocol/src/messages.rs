@@ -104,6 +104,56 @@ impl Pose2D {
     }
 }
 
+/// Text that is not a pose `x,y,yaw`; the message quotes the input.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum PoseParseError {
+    #[error(
+        "invalid pose {input:?}: expected x,y,yaw (metres, metres, radians; three \
+         comma-separated numbers), got {parts} part(s)"
+    )]
+    Parts { input: String, parts: usize },
+    #[error("invalid pose {input:?}: {component} = {value:?} is not a finite number")]
+    NotFinite {
+        input: String,
+        /// `x`, `y` or `yaw`.
+        component: &'static str,
+        value: String,
+    },
+}
+
+/// Parses `x,y,yaw` in metres, metres and radians, e.g. `"2.5,-1,1.57"`; spaces around the
+/// numbers are allowed. Every command line that takes a pose (`--start`, `--goal`, `--pose`,
+/// `--initial-pose`) parses it with this, through clap's `FromStr` support.
+impl std::str::FromStr for Pose2D {
+    type Err = PoseParseError;
+
+    fn from_str(input: &str) -> Result<Self, Self::Err> {
+        let parts: Vec<&str> = input.split(',').map(str::trim).collect();
+        let [x, y, yaw] = parts.as_slice() else {
+            return Err(PoseParseError::Parts {
+                input: input.to_string(),
+                parts: parts.len(),
+            });
+        };
+        let number = |component: &'static str, value: &str| {
+            value
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| PoseParseError::NotFinite {
+                    input: input.to_string(),
+                    component,
+                    value: value.to_string(),
+                })
+        };
+        Ok(Pose2D::new(
+            number("x", x)?,
+            number("y", y)?,
+            number("yaw", yaw)?,
+        ))
+    }
+}
+
 /// One sweep of a planar LIDAR, in the robot frame.
 ///
 /// Beam `i` points at `angle_min_rad + i * angle_increment_rad`. A range `>= range_max_m` means
@@ -928,5 +978,51 @@ mod tests {
         let mut bad = grid.clone();
         bad.cells[0] = 101;
         assert!(bad.validate().unwrap_err().reason.contains("101"));
+    }
+
+    #[test]
+    fn poses_parse_from_text() {
+        let p: Pose2D = "1.5,-2,0.3".parse().unwrap();
+        assert_eq!(p, Pose2D::new(1.5, -2.0, 0.3));
+        let p: Pose2D = " 3 , 4.25 ,-1.57 ".parse().unwrap();
+        assert_eq!(p, Pose2D::new(3.0, 4.25, -1.57));
+        assert_eq!("0,0,0".parse::<Pose2D>().unwrap(), Pose2D::default());
+    }
+
+    #[test]
+    fn bad_pose_text_is_refused_naming_the_input() {
+        // Two components are refused: a pose without a heading is a mistake, not yaw 0.
+        let e = "1,2".parse::<Pose2D>().unwrap_err();
+        assert_eq!(
+            e,
+            PoseParseError::Parts {
+                input: "1,2".into(),
+                parts: 2
+            }
+        );
+        let text = e.to_string();
+        assert!(
+            text.contains("\"1,2\"") && text.contains("x,y,yaw"),
+            "{text}"
+        );
+        assert!(matches!(
+            "1,2,3,4".parse::<Pose2D>(),
+            Err(PoseParseError::Parts { parts: 4, .. })
+        ));
+        assert!("".parse::<Pose2D>().is_err());
+        let e = "3,abc,0".parse::<Pose2D>().unwrap_err();
+        assert!(matches!(
+            &e,
+            PoseParseError::NotFinite { component: "y", value, .. } if value == "abc"
+        ));
+        let text = e.to_string();
+        assert!(
+            text.contains("3,abc,0") && text.contains("y = \"abc\""),
+            "{text}"
+        );
+        for bad in ["1,nan,0", "inf,0,0", "1,2,", "1,2,abc"] {
+            let e = bad.parse::<Pose2D>().unwrap_err().to_string();
+            assert!(e.contains(bad), "{e}");
+        }
     }
 }

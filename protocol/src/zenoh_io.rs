@@ -1,4 +1,5 @@
-//! Glue between the codec and Zenoh: encodings, publishing, replying and decoding samples.
+//! Glue between the codec and Zenoh: how every process configures and opens its session
+//! ([`SessionArgs`]), encodings, publishing, replying and decoding samples.
 //!
 //! Publishers declare what they send through the Zenoh `Encoding`: JSON kinds are
 //! `application/json`, framed kinds `application/octet-stream` with schema
@@ -94,6 +95,14 @@ pub fn decode_sample<M: WireMessage>(sample: &Sample) -> Result<M, DecodeError> 
 /// Why a Zenoh session could not be configured or opened.
 #[derive(Debug, thiserror::Error)]
 pub enum SessionError {
+    /// An endpoint Zenoh cannot parse; `field` is `listen` or `connect`.
+    #[error("invalid zenoh {field} endpoint {endpoint:?}: {reason}")]
+    Endpoint {
+        field: &'static str,
+        endpoint: String,
+        reason: String,
+    },
+    /// A setting Zenoh refused; `field` is Zenoh's configuration path.
     #[error("invalid zenoh {field} = {value}: {reason}")]
     Config {
         field: &'static str,
@@ -106,41 +115,149 @@ pub enum SessionError {
     NoLocator,
 }
 
-/// A peer configuration with explicit endpoints and multicast scouting off.
+/// How a fleet process joins Zenoh: the one place that turns endpoints and the scouting choice
+/// into a `zenoh::Config`, shared by every binary (flags) and configuration file (`[zenoh]`).
 ///
 /// Fleet processes find each other through the endpoints they are given (a router between
-/// hosts, loopback on one host), never by multicast, so a test or a demo cannot pick up a
-/// stranger's session on the same network.
+/// hosts, loopback on one host). Multicast scouting is off unless asked for, so a test or a demo
+/// never picks up a stranger's session on the same network.
 ///
-/// # Errors
-/// [`SessionError::Config`] naming the endpoint list that Zenoh refused.
-pub fn peer_config(listen: &[String], connect: &[String]) -> Result<zenoh::Config, SessionError> {
-    let mut config = zenoh::Config::default();
-    for (field, endpoints) in [("listen/endpoints", listen), ("connect/endpoints", connect)] {
-        if endpoints.is_empty() {
-            continue;
+/// With the `cli` feature this is also a clap [`Args`](clap::Args) group that every binary
+/// flattens: `--zenoh-listen ENDPOINT`, `--zenoh-connect ENDPOINT` (both repeatable) and
+/// `--zenoh-multicast-scouting`. In a configuration file the keys are `listen`, `connect` and
+/// `multicast` (alias `multicast_scouting`).
+#[derive(Debug, Clone, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
+pub struct SessionArgs {
+    /// Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable).
+    #[cfg_attr(
+        feature = "cli",
+        arg(id = SessionArgs::LISTEN_ID, long = "zenoh-listen", value_name = "ENDPOINT")
+    )]
+    pub listen: Vec<String>,
+    /// Zenoh endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable).
+    #[cfg_attr(
+        feature = "cli",
+        arg(id = SessionArgs::CONNECT_ID, long = "zenoh-connect", value_name = "ENDPOINT")
+    )]
+    pub connect: Vec<String>,
+    /// Also find Zenoh peers on the LAN by multicast scouting (off: only through the endpoints).
+    #[cfg_attr(
+        feature = "cli",
+        arg(id = SessionArgs::MULTICAST_ID, long = "zenoh-multicast-scouting")
+    )]
+    #[serde(rename = "multicast", alias = "multicast_scouting")]
+    pub multicast_scouting: bool,
+}
+
+impl SessionArgs {
+    /// Clap id of `--zenoh-listen` (for `mut_arg`, e.g. to add a `--listen` alias).
+    pub const LISTEN_ID: &'static str = "zenoh_listen";
+    /// Clap id of `--zenoh-connect`.
+    pub const CONNECT_ID: &'static str = "zenoh_connect";
+    /// Clap id of `--zenoh-multicast-scouting`.
+    pub const MULTICAST_ID: &'static str = "zenoh_multicast_scouting";
+
+    /// A peer with these endpoints and multicast scouting off.
+    #[must_use]
+    pub fn new(listen: &[String], connect: &[String]) -> Self {
+        Self {
+            listen: listen.to_vec(),
+            connect: connect.to_vec(),
+            multicast_scouting: false,
         }
-        let value = serde_json::to_string(endpoints).map_err(|e| SessionError::Config {
-            field,
-            value: format!("{endpoints:?}"),
-            reason: e.to_string(),
-        })?;
-        config
-            .insert_json5(field, &value)
-            .map_err(|e| SessionError::Config {
-                field,
-                value: value.clone(),
+    }
+
+    /// Lays command-line flags over these settings (from a file or defaults): a non-empty
+    /// endpoint list of `flags` replaces the list here, and `--zenoh-multicast-scouting`
+    /// turns scouting on.
+    pub fn override_with(&mut self, flags: &SessionArgs) {
+        if !flags.listen.is_empty() {
+            self.listen.clone_from(&flags.listen);
+        }
+        if !flags.connect.is_empty() {
+            self.connect.clone_from(&flags.connect);
+        }
+        self.multicast_scouting |= flags.multicast_scouting;
+    }
+
+    /// The Zenoh configuration: peer mode, these endpoints, multicast scouting as asked.
+    ///
+    /// # Errors
+    /// [`SessionError::Endpoint`] naming the first endpoint Zenoh cannot parse,
+    /// [`SessionError::Config`] for a setting Zenoh refused.
+    pub fn config(&self) -> Result<zenoh::Config, SessionError> {
+        let mut config = zenoh::Config::default();
+        for (field, path, endpoints) in [
+            ("listen", "listen/endpoints", &self.listen),
+            ("connect", "connect/endpoints", &self.connect),
+        ] {
+            for endpoint in endpoints {
+                endpoint.parse::<zenoh::config::EndPoint>().map_err(|e| {
+                    SessionError::Endpoint {
+                        field,
+                        endpoint: endpoint.clone(),
+                        reason: e.to_string(),
+                    }
+                })?;
+            }
+            if endpoints.is_empty() {
+                continue;
+            }
+            let value = serde_json::to_string(endpoints).map_err(|e| SessionError::Config {
+                field: path,
+                value: format!("{endpoints:?}"),
                 reason: e.to_string(),
             })?;
+            config
+                .insert_json5(path, &value)
+                .map_err(|e| SessionError::Config {
+                    field: path,
+                    value: value.clone(),
+                    reason: e.to_string(),
+                })?;
+        }
+        let multicast = if self.multicast_scouting {
+            "true"
+        } else {
+            "false"
+        };
+        config
+            .insert_json5("scouting/multicast/enabled", multicast)
+            .map_err(|e| SessionError::Config {
+                field: "scouting/multicast/enabled",
+                value: multicast.into(),
+                reason: e.to_string(),
+            })?;
+        Ok(config)
     }
-    config
-        .insert_json5("scouting/multicast/enabled", "false")
-        .map_err(|e| SessionError::Config {
-            field: "scouting/multicast/enabled",
-            value: "false".into(),
-            reason: e.to_string(),
-        })?;
-    Ok(config)
+
+    /// Opens the session.
+    ///
+    /// # Errors
+    /// As [`Self::config`], or [`SessionError::Open`] when Zenoh cannot start it (e.g. a listen
+    /// port in use).
+    pub async fn open(&self) -> Result<Session, SessionError> {
+        let config = self.config()?;
+        if self.listen.is_empty() && self.connect.is_empty() && !self.multicast_scouting {
+            tracing::warn!(
+                "zenoh session without endpoints and with multicast scouting off: it finds no \
+                 peers by itself (give --zenoh-connect, --zenoh-listen or \
+                 --zenoh-multicast-scouting)"
+            );
+        }
+        zenoh::open(config).await.map_err(SessionError::Open)
+    }
+}
+
+/// A peer configuration with explicit endpoints and multicast scouting off: shorthand for
+/// [`SessionArgs::new`] then [`SessionArgs::config`].
+///
+/// # Errors
+/// As [`SessionArgs::config`].
+pub fn peer_config(listen: &[String], connect: &[String]) -> Result<zenoh::Config, SessionError> {
+    SessionArgs::new(listen, connect).config()
 }
 
 /// Opens a session listening on `127.0.0.1:0` and a second session connected to it: two
@@ -149,9 +266,9 @@ pub fn peer_config(listen: &[String], connect: &[String]) -> Result<zenoh::Confi
 /// # Errors
 /// [`SessionError`] if either session cannot be opened.
 pub async fn loopback_pair() -> Result<(Session, Session), SessionError> {
-    let listener = zenoh::open(peer_config(&["tcp/127.0.0.1:0".to_string()], &[])?)
-        .await
-        .map_err(SessionError::Open)?;
+    let listener = SessionArgs::new(&["tcp/127.0.0.1:0".to_string()], &[])
+        .open()
+        .await?;
     let endpoints: Vec<String> = listener
         .info()
         .locators()
@@ -162,9 +279,7 @@ pub async fn loopback_pair() -> Result<(Session, Session), SessionError> {
     if endpoints.is_empty() {
         return Err(SessionError::NoLocator);
     }
-    let connected = zenoh::open(peer_config(&[], &endpoints)?)
-        .await
-        .map_err(SessionError::Open)?;
+    let connected = SessionArgs::new(&[], &endpoints).open().await?;
     Ok((listener, connected))
 }
 
@@ -189,5 +304,144 @@ mod tests {
             encoding_for::<MapGrid>(),
             Encoding::APPLICATION_OCTET_STREAM.with_schema("intention-fleet/map_grid")
         );
+    }
+}
+
+#[cfg(test)]
+mod session_args_tests {
+    // Test code: a failed unwrap is a failed test.
+    #![allow(clippy::unwrap_used)]
+
+    use super::*;
+
+    fn json(config: &zenoh::Config, key: &str) -> serde_json::Value {
+        serde_json::from_str(&config.get_json(key).unwrap()).unwrap()
+    }
+
+    #[test]
+    fn multicast_scouting_is_off_by_default() {
+        let args = SessionArgs::default();
+        assert!(!args.multicast_scouting);
+        let config = args.config().unwrap();
+        assert_eq!(
+            json(&config, "scouting/multicast/enabled"),
+            serde_json::Value::Bool(false)
+        );
+        let on = SessionArgs {
+            multicast_scouting: true,
+            ..SessionArgs::default()
+        };
+        assert_eq!(
+            json(&on.config().unwrap(), "scouting/multicast/enabled"),
+            serde_json::Value::Bool(true)
+        );
+    }
+
+    #[test]
+    fn listen_and_connect_endpoints_are_set() {
+        let args = SessionArgs::new(
+            &["tcp/127.0.0.1:7447".to_string()],
+            &[
+                "tcp/10.0.0.2:7447".to_string(),
+                "udp/10.0.0.3:7447".to_string(),
+            ],
+        );
+        let config = args.config().unwrap();
+        let listen = json(&config, "listen/endpoints").to_string();
+        let connect = json(&config, "connect/endpoints").to_string();
+        assert!(listen.contains("tcp/127.0.0.1:7447"), "{listen}");
+        assert!(connect.contains("tcp/10.0.0.2:7447"), "{connect}");
+        assert!(connect.contains("udp/10.0.0.3:7447"), "{connect}");
+        // The shorthand builds the same configuration.
+        let short = peer_config(&args.listen, &args.connect).unwrap();
+        assert_eq!(
+            short.get_json("connect/endpoints").unwrap(),
+            config.get_json("connect/endpoints").unwrap()
+        );
+    }
+
+    #[test]
+    fn a_bad_endpoint_is_an_error_naming_it() {
+        let args = SessionArgs::new(
+            &["tcp/127.0.0.1:7447".to_string()],
+            &["nonsense".to_string()],
+        );
+        let err = args.config().unwrap_err();
+        assert!(
+            matches!(&err, SessionError::Endpoint { field: "connect", endpoint, .. } if endpoint == "nonsense"),
+            "{err:?}"
+        );
+        let text = err.to_string();
+        assert!(
+            text.contains("connect") && text.contains("nonsense"),
+            "{text}"
+        );
+        let err = SessionArgs::new(&["tcp-no-address".to_string()], &[])
+            .config()
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("listen") && err.contains("tcp-no-address"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn flags_override_the_file() {
+        let mut file = SessionArgs::new(
+            &["tcp/0.0.0.0:7447".to_string()],
+            &["tcp/10.0.0.2:7447".to_string()],
+        );
+        file.override_with(&SessionArgs::default());
+        assert_eq!(file.listen, ["tcp/0.0.0.0:7447"]);
+        assert!(!file.multicast_scouting);
+        file.override_with(&SessionArgs {
+            listen: vec![],
+            connect: vec!["tcp/10.0.0.9:7447".to_string()],
+            multicast_scouting: true,
+        });
+        assert_eq!(file.listen, ["tcp/0.0.0.0:7447"]);
+        assert_eq!(file.connect, ["tcp/10.0.0.9:7447"]);
+        assert!(file.multicast_scouting);
+    }
+
+    #[test]
+    fn file_keys_are_listen_connect_and_multicast() {
+        let args: SessionArgs =
+            serde_json::from_str(r#"{"listen":["tcp/0.0.0.0:7448"],"multicast":true}"#).unwrap();
+        assert_eq!(args.listen, ["tcp/0.0.0.0:7448"]);
+        assert!(args.multicast_scouting && args.connect.is_empty());
+        let alias: SessionArgs = serde_json::from_str(r#"{"multicast_scouting":true}"#).unwrap();
+        assert!(alias.multicast_scouting);
+        assert!(serde_json::from_str::<SessionArgs>(r#"{"lisen":[]}"#).is_err());
+    }
+
+    #[cfg(feature = "cli")]
+    #[test]
+    fn every_binary_gets_the_same_flags() {
+        use clap::{CommandFactory, Parser};
+
+        #[derive(Debug, Parser)]
+        struct Cli {
+            #[command(flatten)]
+            zenoh: SessionArgs,
+        }
+        Cli::command().debug_assert();
+        let cli = Cli::try_parse_from(["x"]).unwrap();
+        assert_eq!(cli.zenoh, SessionArgs::default());
+        let cli = Cli::try_parse_from([
+            "x",
+            "--zenoh-listen",
+            "tcp/0.0.0.0:7447",
+            "--zenoh-connect",
+            "tcp/10.0.0.2:7447",
+            "--zenoh-connect",
+            "tcp/10.0.0.3:7447",
+            "--zenoh-multicast-scouting",
+        ])
+        .unwrap();
+        assert_eq!(cli.zenoh.listen, ["tcp/0.0.0.0:7447"]);
+        assert_eq!(cli.zenoh.connect.len(), 2);
+        assert!(cli.zenoh.multicast_scouting);
     }
 }

@@ -4,19 +4,29 @@
 //! Flags override the file: `--site`, `--controller`, `--model`, `--map`, `--initial-pose`.
 //! Without `--initial-pose` (and no `[localization] initial_pose` in the file) the agent
 //! localizes globally.
+//!
+//! Zenoh: the shared [`SessionArgs`] flags (`--zenoh-listen`/`--listen`,
+//! `--zenoh-connect`/`--connect`, `--zenoh-multicast-scouting`); multicast scouting is off
+//! unless asked for, so an agent meets only the peers it is pointed at.
 
 use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Parser;
-use protocol::{MapName, Pose2D, RobotId, SiteId};
+use protocol::{MapName, Pose2D, RobotId, SessionArgs, SiteId};
 
 use crate::config::{AgentConfig, ControllerKind};
 use crate::node::{self, NodeOptions};
 
 /// Robot agent: AMCL localization, the controller and the safety loop of one robot.
 #[derive(Debug, Clone, Parser)]
-#[command(name = "robot-agent", version, about)]
+#[command(
+    name = "robot-agent",
+    version,
+    about,
+    mut_arg(SessionArgs::LISTEN_ID, |a| a.visible_alias("listen")),
+    mut_arg(SessionArgs::CONNECT_ID, |a| a.visible_alias("connect"))
+)]
 pub struct Cli {
     /// This robot's id (the `<robot_id>` key chunk).
     #[arg(long)]
@@ -35,40 +45,19 @@ pub struct Cli {
     pub map: Option<MapName>,
     /// Initial pose `x,y,yaw` in the map frame (metres, radians); without it, global
     /// localization.
-    #[arg(long, value_parser = parse_pose, allow_hyphen_values = true)]
+    #[arg(long, allow_hyphen_values = true)]
     pub initial_pose: Option<Pose2D>,
     /// Agent configuration TOML (see robot-agent/agent.example.toml).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable).
-    #[arg(long)]
-    pub listen: Vec<String>,
-    /// Zenoh endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable).
-    #[arg(long)]
-    pub connect: Vec<String>,
-    /// Turn off Zenoh multicast scouting (peers are then found only through the endpoints).
-    #[arg(long)]
+    /// The Zenoh session: `--zenoh-listen` (alias `--listen`), `--zenoh-connect` (alias
+    /// `--connect`), `--zenoh-multicast-scouting`.
+    #[command(flatten)]
+    pub zenoh: SessionArgs,
+    /// Multicast scouting is off unless `--zenoh-multicast-scouting` is given; this flag is
+    /// still accepted (and changes nothing) for scripts written when it was on by default.
+    #[arg(long, hide = true, conflicts_with = SessionArgs::MULTICAST_ID)]
     pub no_multicast: bool,
-}
-
-/// Parses `x,y,yaw` (metres, metres, radians).
-///
-/// # Errors
-/// A message naming the bad part.
-pub fn parse_pose(text: &str) -> Result<Pose2D, String> {
-    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
-    let [x, y, yaw] = parts.as_slice() else {
-        return Err(format!(
-            "`{text}` is not x,y,yaw (three comma-separated numbers)"
-        ));
-    };
-    let num = |name: &str, s: &str| -> Result<f64, String> {
-        s.parse::<f64>()
-            .ok()
-            .filter(|v| v.is_finite())
-            .ok_or_else(|| format!("{name} `{s}` is not a finite number"))
-    };
-    Ok(Pose2D::new(num("x", x)?, num("y", y)?, num("yaw", yaw)?))
 }
 
 /// The configuration file (or the defaults) with the flags applied, validated.
@@ -113,7 +102,7 @@ pub fn merged_config(cli: &Cli) -> anyhow::Result<AgentConfig> {
 /// As [`merged_config`], or endpoints Zenoh refuses.
 pub fn node_options(cli: &Cli) -> anyhow::Result<NodeOptions> {
     let config = merged_config(cli)?;
-    let zenoh = node::zenoh_config(&cli.listen, &cli.connect, !cli.no_multicast)?;
+    let zenoh = cli.zenoh.config()?;
     Ok(NodeOptions {
         robot_id: cli.robot_id.clone(),
         config,
@@ -140,4 +129,63 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
         node::run(options, shutdown).await
     })?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    fn parse(args: &[&str]) -> Result<Cli, clap::Error> {
+        Cli::try_parse_from(["robot-agent", "--robot-id", "r1"].iter().chain(args))
+    }
+
+    #[test]
+    fn zenoh_flags_are_the_shared_ones_with_the_old_names_kept() {
+        Cli::command().debug_assert();
+        let cli = parse(&[]).unwrap();
+        assert_eq!(cli.zenoh, SessionArgs::default());
+        assert!(!cli.zenoh.multicast_scouting, "multicast is off by default");
+        let cli = parse(&[
+            "--connect",
+            "tcp/127.0.0.1:7447",
+            "--zenoh-connect",
+            "tcp/127.0.0.1:7448",
+            "--listen",
+            "tcp/0.0.0.0:7449",
+            "--no-multicast",
+        ])
+        .unwrap();
+        assert_eq!(
+            cli.zenoh.connect,
+            ["tcp/127.0.0.1:7447", "tcp/127.0.0.1:7448"]
+        );
+        assert_eq!(cli.zenoh.listen, ["tcp/0.0.0.0:7449"]);
+        assert!(!cli.zenoh.multicast_scouting);
+        assert!(
+            parse(&["--zenoh-multicast-scouting"])
+                .unwrap()
+                .zenoh
+                .multicast_scouting
+        );
+        assert!(parse(&["--zenoh-multicast-scouting", "--no-multicast"]).is_err());
+    }
+
+    #[test]
+    fn a_bad_endpoint_is_named_when_the_options_are_built() {
+        let cli = parse(&["--map", "office", "--connect", "nonsense"]).unwrap();
+        let e = format!("{:#}", node_options(&cli).unwrap_err());
+        assert!(e.contains("connect") && e.contains("nonsense"), "{e}");
+    }
+
+    #[test]
+    fn the_initial_pose_is_parsed_by_pose2d() {
+        let cli = parse(&["--initial-pose", "-1.5,2,0.3"]).unwrap();
+        assert_eq!(cli.initial_pose, Some(Pose2D::new(-1.5, 2.0, 0.3)));
+        let e = parse(&["--initial-pose", "1,x,0"]).unwrap_err().to_string();
+        assert!(
+            e.contains("--initial-pose") && e.contains("y = \"x\""),
+            "{e}"
+        );
+    }
 }

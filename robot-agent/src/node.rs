@@ -64,31 +64,26 @@ fn zenoh_err(action: &'static str) -> impl FnOnce(zenoh::Error) -> NodeError {
     }
 }
 
-/// The Zenoh configuration of an agent: a peer with the given endpoints.
-///
-/// `multicast_scouting` keeps Zenoh's default discovery of peers on the LAN (the command line's
-/// default); tests turn it off so that they only ever meet their own sessions.
+/// The Zenoh configuration of an agent: a peer with the given endpoints, multicast scouting
+/// on only when asked for (see [`protocol::SessionArgs`], which builds it).
 ///
 /// # Errors
-/// [`NodeError::Zenoh`] naming an endpoint list or setting Zenoh refused.
+/// [`NodeError::Zenoh`] naming the endpoint or setting Zenoh refused.
 pub fn zenoh_config(
     listen: &[String],
     connect: &[String],
     multicast_scouting: bool,
 ) -> Result<zenoh::Config, NodeError> {
-    let mut config = protocol::peer_config(listen, connect).map_err(|e| NodeError::Zenoh {
+    protocol::SessionArgs {
+        listen: listen.to_vec(),
+        connect: connect.to_vec(),
+        multicast_scouting,
+    }
+    .config()
+    .map_err(|e| NodeError::Zenoh {
         action: "configure the session",
         reason: e.to_string(),
-    })?;
-    if multicast_scouting {
-        config
-            .insert_json5("scouting/multicast/enabled", "true")
-            .map_err(|e| NodeError::Zenoh {
-                action: "enable multicast scouting",
-                reason: e.to_string(),
-            })?;
-    }
-    Ok(config)
+    })
 }
 
 /// The controller a configuration asks for; network controllers load and check their model

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
-use protocol::{Pose2D, SiteId};
+use protocol::{Pose2D, SessionArgs, SiteId};
 use serde::Serialize;
 
 use crate::camera::{render, render_per_pixel};
@@ -30,7 +30,7 @@ pub enum Cmd {
         scenario: PathBuf,
         /// x,y,yaw in the map frame (metres, radians).
         #[arg(long, allow_hyphen_values = true)]
-        pose: String,
+        pose: Pose2D,
         #[arg(long)]
         out: PathBuf,
         #[arg(long)]
@@ -50,6 +50,10 @@ pub enum Cmd {
         scale: u32,
     },
     /// Run the real-time Zenoh driver until Ctrl-C.
+    #[command(
+        mut_arg(SessionArgs::LISTEN_ID, |a| a.visible_alias("listen")),
+        mut_arg(SessionArgs::CONNECT_ID, |a| a.visible_alias("connect"))
+    )]
     Run {
         #[arg(long)]
         scenario: PathBuf,
@@ -57,12 +61,10 @@ pub enum Cmd {
         robots: usize,
         #[arg(long, default_value = "default")]
         site: String,
-        /// Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447.
-        #[arg(long)]
-        listen: Vec<String>,
-        /// Zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447.
-        #[arg(long)]
-        connect: Vec<String>,
+        /// The Zenoh session: `--zenoh-listen` (alias `--listen`), `--zenoh-connect` (alias
+        /// `--connect`), `--zenoh-multicast-scouting` (off by default).
+        #[command(flatten)]
+        zenoh: SessionArgs,
         #[arg(long)]
         config: Option<PathBuf>,
         #[arg(long, default_value_t = 20.0)]
@@ -76,6 +78,8 @@ pub enum Cmd {
     },
     /// Measure camera frames/s and lock-step steps/s; writes JSON and prints a markdown table.
     Bench {
+        /// Scenario (default: task_b.yaml in the scenarios folder: $FLEET_SCENARIOS_DIR,
+        /// ./sim/scenarios, ./scenarios or the user data directory).
         #[arg(long)]
         scenario: Option<PathBuf>,
         #[arg(long)]
@@ -91,22 +95,6 @@ pub enum Cmd {
     },
     /// Print the scenario JSON Schema.
     Schema,
-}
-
-fn parse_pose(text: &str) -> Result<Pose2D> {
-    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
-    if parts.len() != 3 {
-        bail!("invalid --pose {text:?}: expected x,y,yaw (three comma-separated numbers)");
-    }
-    let mut v = [0.0; 3];
-    for (slot, (name, part)) in v.iter_mut().zip(["x", "y", "yaw"].iter().zip(&parts)) {
-        *slot = part
-            .parse::<f64>()
-            .ok()
-            .filter(|f| f.is_finite())
-            .with_context(|| format!("invalid --pose {name} = {part:?}: not a finite number"))?;
-    }
-    Ok(Pose2D::new(v[0], v[1], v[2]))
 }
 
 fn load_config(path: Option<&Path>) -> Result<SimConfig> {
@@ -129,7 +117,6 @@ pub fn run(cli: Cli) -> Result<()> {
             scan_out,
             config,
         } => {
-            let pose = parse_pose(&pose)?;
             let mut world = World::from_scenario_file(&scenario, load_config(config.as_deref())?)?;
             world.add_robot(protocol::RobotId::new("robot_1")?, pose)?;
             let image = world.render_camera(0)?;
@@ -167,8 +154,7 @@ pub fn run(cli: Cli) -> Result<()> {
             scenario,
             robots,
             site,
-            listen,
-            connect,
+            zenoh,
             config,
             odom_hz,
             scan_hz,
@@ -188,24 +174,23 @@ pub fn run(cli: Cli) -> Result<()> {
                 cmd_timeout_ms,
             };
             driver_config.validate()?;
-            // Where the robots stand, for whoever starts their agents (the fleet demo reads it).
-            for (i, id) in world.robot_ids().iter().enumerate() {
-                if let Some(p) = world.ground_truth_pose(i) {
-                    println!("robot {id} at {:.3},{:.3},{:.4}", p.x_m, p.y_m, p.yaw_rad);
-                }
+            // Where the robots stand, for whoever starts their agents: the roster, one JSON line
+            // on stdout (the launcher reads it with `Roster::parse_line`); logs for people.
+            let roster = crate::roster::Roster::of_world(&world);
+            for r in &roster.robots {
+                tracing::info!(robot = %r.id, "starts at {:.3},{:.3},{:.4}", r.x_m, r.y_m, r.yaw_rad);
+            }
+            {
+                use std::io::Write as _;
+                let mut stdout = std::io::stdout().lock();
+                writeln!(stdout, "{}", roster.to_line()?)?;
+                stdout.flush()?;
             }
             let rt = tokio::runtime::Runtime::new()?;
             rt.block_on(async move {
-                // Explicit endpoints mean no multicast discovery (two demos on one host must not
-                // drive each other's robots); with none, plain Zenoh defaults find peers.
-                let zc = if listen.is_empty() && connect.is_empty() {
-                    zenoh::Config::default()
-                } else {
-                    protocol::zenoh_io::peer_config(&listen, &connect)?
-                };
-                let session = zenoh::open(zc)
-                    .await
-                    .map_err(|e| anyhow::anyhow!("cannot open zenoh session: {e}"))?;
+                // Multicast scouting only when asked for: two demos on one host must not drive
+                // each other's robots.
+                let session = zenoh.open().await?;
                 driver::run(&session, world, &site, driver_config, terminated()).await?;
                 session
                     .close()
@@ -219,9 +204,10 @@ pub fn run(cli: Cli) -> Result<()> {
             out,
             frames,
         } => {
-            let scenario = scenario.unwrap_or_else(|| {
-                Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/task_b.yaml")
-            });
+            let scenario = match scenario {
+                Some(s) => s,
+                None => protocol::data_dirs::find_scenarios_dir(None)?.join("task_b.yaml"),
+            };
             let result = bench(&scenario, frames.max(10))?;
             println!("{}", result.markdown());
             if let Some(out) = out {
@@ -406,5 +392,48 @@ async fn terminated() {
     #[cfg(not(unix))]
     if let Err(e) = tokio::signal::ctrl_c().await {
         tracing::error!("cannot wait for Ctrl-C: {e}");
+    }
+}
+
+#[cfg(test)]
+mod session_and_pose_flag_tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn run_takes_the_shared_zenoh_flags_and_render_a_pose2d() {
+        Cli::command().debug_assert();
+        let cli = Cli::try_parse_from([
+            "sim",
+            "run",
+            "--scenario",
+            "s.yaml",
+            "--connect",
+            "tcp/127.0.0.1:7447",
+            "--zenoh-listen",
+            "tcp/127.0.0.1:0",
+        ])
+        .unwrap();
+        let Cmd::Run { zenoh, .. } = cli.command else {
+            unreachable!("parsed a run command")
+        };
+        assert_eq!(zenoh.connect, ["tcp/127.0.0.1:7447"]);
+        assert_eq!(zenoh.listen, ["tcp/127.0.0.1:0"]);
+        assert!(!zenoh.multicast_scouting, "multicast is off by default");
+        let cli = Cli::try_parse_from([
+            "sim",
+            "render",
+            "--scenario",
+            "s.yaml",
+            "--pose",
+            "-2.5,10,0",
+            "--out",
+            "x.png",
+        ])
+        .unwrap();
+        let Cmd::Render { pose, .. } = cli.command else {
+            unreachable!("parsed a render command")
+        };
+        assert_eq!(pose, Pose2D::new(-2.5, 10.0, 0.0));
     }
 }

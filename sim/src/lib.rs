@@ -5,7 +5,8 @@
 //! - [`world`]: the lock-step simulation ([`World::step`]) with collisions, LIDAR and odometry;
 //! - [`camera`]: the monocular camera renderer ([`World::render_camera`]);
 //! - [`mapgen`]: the generated floor plans and shipped scenarios;
-//! - [`driver`]: the real-time Zenoh driver; [`cli`]: the `sim` command line.
+//! - [`driver`]: the real-time Zenoh driver; [`roster`]: the robot roster `sim run` prints (JSON),
+//!   with its one parser; [`cli`]: the `sim` command line.
 
 pub mod appearance;
 pub mod camera;
@@ -15,10 +16,12 @@ pub mod driver;
 pub mod geom;
 pub mod mapgen;
 pub mod raycast;
+pub mod roster;
 pub mod scenario;
 pub mod view;
 pub mod world;
 
 pub use config::SimConfig;
+pub use roster::{Roster, RosterError, RosterRobot};
 pub use scenario::{Scenario, ScenarioError};
 pub use world::{Collision, Command, Observations, Obstacle, RobotObservation, SimError, World};

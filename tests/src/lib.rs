@@ -4,17 +4,20 @@
 //!
 //! The binaries come from the cargo target folder of the test executable
 //! (`target/<profile>/`), or from `FLEET_BIN_DIR`; `scripts/test.sh` builds them before the
-//! tests run. Every process is killed when its handle drops, so a failing test leaves nothing
-//! behind.
+//! tests run. The simulator and the agents are started by the same launcher as
+//! `planner-service demo` ([`planner_service::launch`], via [`start_robots`]); every process is
+//! a [`Process`], killed when its handle drops, so a failing test leaves nothing behind.
 
-use std::io::{BufRead, BufReader};
 use std::net::TcpListener;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
-use std::sync::mpsc;
+use std::process::Command;
 use std::time::{Duration, Instant};
 
+pub use planner_service::launch::{LaunchError, Process, Robots, RobotsSpec};
+use protocol::{ControllerKind, MapName};
 use serde_json::Value;
+/// The repository root (for the scenarios and floor plans).
+pub use test_support::repo_root;
 
 /// A harness failure, with what was being done.
 #[derive(Debug, thiserror::Error)]
@@ -31,6 +34,8 @@ pub enum HarnessError {
     Http { what: String, reason: String },
     #[error("timed out after {after:?} waiting for {what}")]
     Timeout { what: String, after: Duration },
+    #[error(transparent)]
+    Launch(#[from] LaunchError),
 }
 
 type Result<T> = std::result::Result<T, HarnessError>;
@@ -67,12 +72,6 @@ pub fn bin_dir() -> Result<PathBuf> {
     Ok(dir)
 }
 
-/// The repository root (for the scenarios and floor plans).
-#[must_use]
-pub fn repo_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
 /// A TCP port that was free a moment ago (for endpoints that must stay the same across a
 /// restart of the service).
 ///
@@ -83,138 +82,9 @@ pub fn free_port() -> Result<u16> {
     Ok(l.local_addr().map_err(io("read the free port"))?.port())
 }
 
-/// A child process killed (SIGKILL) when dropped, with its output lines on a channel.
-pub struct Proc {
-    pub name: String,
-    child: Child,
-    lines: mpsc::Receiver<String>,
-}
-
-impl Proc {
-    /// Starts `bin` with `args`; stdout and stderr lines are collected (and echoed to the
-    /// test's stderr prefixed with `name`, so a failing test shows them).
-    ///
-    /// # Errors
-    /// If the process cannot start.
-    pub fn spawn(name: &str, bin: &Path, args: &[String]) -> Result<Self> {
-        let mut child = Command::new(bin)
-            .args(args)
-            .env(
-                "RUST_LOG",
-                std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()),
-            )
-            .env_remove("RUST_BACKTRACE")
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .map_err(io(format!("start {}", bin.display())))?;
-        let (tx, rx) = mpsc::channel();
-        let streams: Vec<Box<dyn std::io::Read + Send>> = [
-            child
-                .stdout
-                .take()
-                .map(|s| Box::new(s) as Box<dyn std::io::Read + Send>),
-            child
-                .stderr
-                .take()
-                .map(|s| Box::new(s) as Box<dyn std::io::Read + Send>),
-        ]
-        .into_iter()
-        .flatten()
-        .collect();
-        for stream in streams {
-            let tx = tx.clone();
-            let label = name.to_string();
-            std::thread::spawn(move || {
-                for line in BufReader::new(stream)
-                    .lines()
-                    .map_while(std::result::Result::ok)
-                {
-                    eprintln!("[{label}] {line}");
-                    // Nobody listening any more is fine: keep draining so the child never
-                    // blocks on a full pipe.
-                    let _ = tx.send(line);
-                }
-            });
-        }
-        Ok(Self {
-            name: name.to_string(),
-            child,
-            lines: rx,
-        })
-    }
-
-    /// Waits for an output line for which `pick` returns something.
-    ///
-    /// # Errors
-    /// [`HarnessError::Timeout`], or [`HarnessError::Setup`] when the process exits first.
-    pub fn wait_line<T>(
-        &mut self,
-        timeout: Duration,
-        mut pick: impl FnMut(&str) -> Option<T>,
-    ) -> Result<T> {
-        let deadline = Instant::now() + timeout;
-        loop {
-            let left = deadline.saturating_duration_since(Instant::now());
-            match self
-                .lines
-                .recv_timeout(left.min(Duration::from_millis(200)))
-            {
-                Ok(line) => {
-                    if let Some(v) = pick(&line) {
-                        return Ok(v);
-                    }
-                }
-                Err(mpsc::RecvTimeoutError::Timeout) => {
-                    if let Ok(Some(status)) = self.child.try_wait() {
-                        return Err(HarnessError::Setup(format!(
-                            "{} exited ({status})",
-                            self.name
-                        )));
-                    }
-                    if left.is_zero() {
-                        return Err(HarnessError::Timeout {
-                            what: format!("output of {}", self.name),
-                            after: timeout,
-                        });
-                    }
-                }
-                Err(mpsc::RecvTimeoutError::Disconnected) => {
-                    return Err(HarnessError::Setup(format!(
-                        "{} closed its output",
-                        self.name
-                    )));
-                }
-            }
-        }
-    }
-
-    /// Kills the process at once (a crash, as far as the others can tell).
-    pub fn kill(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-
-    /// Whether it still runs.
-    pub fn is_running(&mut self) -> bool {
-        matches!(self.child.try_wait(), Ok(None))
-    }
-
-    #[must_use]
-    pub fn pid(&self) -> u32 {
-        self.child.id()
-    }
-}
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        self.kill();
-    }
-}
-
 /// A running planner service.
 pub struct Service {
-    pub proc: Proc,
+    pub proc: Process,
     pub url: String,
     pub token: String,
     /// The Zenoh endpoint robots connect to.
@@ -240,7 +110,14 @@ impl Service {
             "--zenoh-listen".into(),
             zenoh.clone(),
         ];
-        let mut proc = Proc::spawn("service", &bins.join("planner-service"), &args)?;
+        let mut cmd = Command::new(bins.join("planner-service"));
+        cmd.args(&args)
+            .env(
+                "RUST_LOG",
+                std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()),
+            )
+            .env_remove("RUST_BACKTRACE");
+        let mut proc = Process::spawn("service", cmd)?;
         let url = proc.wait_line(Duration::from_secs(60), |l| {
             l.strip_prefix("listening on ")
                 .map(|u| u.trim().to_string())
@@ -384,70 +261,24 @@ fn json_of(what: &str, resp: reqwest::blocking::Response) -> Result<Value> {
     })
 }
 
-/// The simulator with its robots' start poses (`x,y,yaw`).
-pub struct Sim {
-    pub proc: Proc,
-    pub robots: Vec<(String, String)>,
-}
-
-impl Sim {
-    /// Starts `sim run` on `scenario` with `robots` robots connected to `zenoh`.
-    ///
-    /// # Errors
-    /// If it does not report its robots within 60 s.
-    pub fn start(bins: &Path, scenario: &Path, robots: usize, zenoh: &str) -> Result<Self> {
-        let args: Vec<String> = vec![
-            "run".into(),
-            "--scenario".into(),
-            scenario.display().to_string(),
-            "--robots".into(),
-            robots.to_string(),
-            "--connect".into(),
-            zenoh.into(),
-        ];
-        let mut proc = Proc::spawn("sim", &bins.join("sim"), &args)?;
-        let mut found = Vec::new();
-        while found.len() < robots {
-            let r = proc.wait_line(Duration::from_secs(60), |l| {
-                let rest = l.strip_prefix("robot ")?;
-                let (id, pose) = rest.split_once(" at ")?;
-                Some((id.to_string(), pose.trim().to_string()))
-            })?;
-            found.push(r);
-        }
-        Ok(Self {
-            proc,
-            robots: found,
-        })
-    }
-}
-
-/// Starts a robot agent for `robot` at `pose` (`x,y,yaw`) on `map`.
+/// Starts the simulator on `scenario` with `robots` robots and one `controller` agent per
+/// robot on `map`, all connected to the service's Zenoh endpoint `zenoh`.
 ///
 /// # Errors
-/// If it cannot start.
-pub fn start_agent(
+/// A bad map name, or [`LaunchError`] (the simulator does not report its robots within 60 s, a
+/// child cannot start).
+pub fn start_robots(
     bins: &Path,
-    robot: &str,
-    pose: &str,
+    scenario: &Path,
+    robots: usize,
     map: &str,
-    controller: &str,
+    controller: ControllerKind,
     zenoh: &str,
-) -> Result<Proc> {
-    let args: Vec<String> = vec![
-        "--robot-id".into(),
-        robot.into(),
-        "--controller".into(),
-        controller.into(),
-        "--map".into(),
-        map.into(),
-        "--initial-pose".into(),
-        pose.into(),
-        "--connect".into(),
-        zenoh.into(),
-        "--no-multicast".into(),
-    ];
-    Proc::spawn(&format!("agent {robot}"), &bins.join("robot-agent"), &args)
+) -> Result<Robots> {
+    let map = MapName::new(map).map_err(|e| HarnessError::Setup(format!("map {map:?}: {e}")))?;
+    let mut spec = RobotsSpec::new(bins, scenario, robots, map, vec![zenoh.to_string()]);
+    spec.controllers = vec![controller];
+    Ok(Robots::start(&spec)?)
 }
 
 /// The robot `id` in a robot list.

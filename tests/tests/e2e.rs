@@ -10,7 +10,10 @@ use std::path::PathBuf;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-use fleet_tests::{bin_dir, free_port, repo_root, robot, start_agent, state_kind, Service, Sim};
+use fleet_tests::{
+    bin_dir, free_port, repo_root, robot, start_robots, state_kind, Robots, Service,
+};
+use protocol::ControllerKind;
 use serde_json::{json, Value};
 
 static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
@@ -28,8 +31,8 @@ fn plan_yaml() -> PathBuf {
 /// Service + map + simulator + one dynamic-window agent per robot, all robots online.
 struct Fleet {
     service: Service,
-    sim: Sim,
-    agents: Vec<fleet_tests::Proc>,
+    /// The simulator and the agents, started by the launcher `planner-service demo` uses.
+    robots: Robots,
     data: tempfile::TempDir,
     zenoh_port: u16,
 }
@@ -41,15 +44,21 @@ fn start_fleet(robots: usize) -> Fleet {
     let service = Service::start(&bins, data.path(), zenoh_port, TOKEN).unwrap();
     let meta = service.upload_ros_map(MAP, &plan_yaml()).unwrap();
     assert_eq!(meta["name"], MAP);
-    let sim = Sim::start(&bins, &scenario(), robots, &service.zenoh).unwrap();
-    let agents = sim
+    let robots = start_robots(
+        &bins,
+        &scenario(),
+        robots,
+        MAP,
+        ControllerKind::DynamicWindow,
+        &service.zenoh,
+    )
+    .unwrap();
+    let ids: Vec<String> = robots
+        .roster
         .robots
         .iter()
-        .map(|(id, pose)| {
-            start_agent(&bins, id, pose, MAP, "dynamic-window", &service.zenoh).unwrap()
-        })
+        .map(|r| r.id.to_string())
         .collect();
-    let ids: Vec<String> = sim.robots.iter().map(|(id, _)| id.clone()).collect();
     service
         .wait_for("/api/v1/robots", Duration::from_secs(90), |v| {
             ids.iter()
@@ -61,8 +70,7 @@ fn start_fleet(robots: usize) -> Fleet {
         .unwrap();
     Fleet {
         service,
-        sim,
-        agents,
+        robots,
         data,
         zenoh_port,
     }
@@ -178,6 +186,7 @@ fn a_killed_agent_pauses_its_task_and_the_other_robot_carries_on() {
     let t2 = create_task(&fleet.service, "robot_2", &[(13.0, 10.0)]);
     wait_task(&fleet.service, &t2, "active", Duration::from_secs(30));
     let victim = fleet
+        .robots
         .agents
         .iter_mut()
         .find(|a| a.name == "agent robot_2")
@@ -192,7 +201,7 @@ fn a_killed_agent_pauses_its_task_and_the_other_robot_carries_on() {
     let r2 = fleet.service.get("/api/v1/robots/robot_2").unwrap();
     assert_eq!(r2["online"], false);
     wait_task(&fleet.service, &t1, "completed", Duration::from_secs(180));
-    assert!(fleet.sim.proc.is_running());
+    assert!(fleet.robots.sim.is_running());
 }
 
 #[test]

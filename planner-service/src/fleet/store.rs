@@ -204,6 +204,19 @@ impl TaskStore {
         }
         Ok((task, changed))
     }
+
+    /// Writes `task` over its stored record in one transaction.
+    ///
+    /// # Errors
+    /// [`StoreError::NotFound`] when no task has its id (nothing is written then),
+    /// [`StoreError::Db`].
+    pub fn replace(&self, task: &Task) -> Result<(), StoreError> {
+        self.update::<StoreError>(&task.id, |stored| {
+            stored.clone_from(task);
+            Ok(true)
+        })
+        .map(|_| ())
+    }
 }
 
 fn db_err(action: &'static str, e: impl Into<redb::Error>) -> StoreError {

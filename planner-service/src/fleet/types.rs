@@ -5,8 +5,8 @@ use std::fmt;
 use std::str::FromStr;
 
 use protocol::{
-    AgentState, AgentStatus, ControllerKind, Dlm, MapName, MapRef, Pose2D, PoseEstimate, RobotId,
-    StopReason, TaskId, TaskState,
+    AgentState, AgentStatus, ControllerKind, Dlm, Intention, MapName, MapRef, Pose2D, PoseEstimate,
+    RobotId, StopReason, TaskId, TaskState,
 };
 use serde::{Deserialize, Serialize};
 
@@ -227,6 +227,21 @@ pub struct IntentionView {
     pub stamp_ns: u64,
     /// From the pose arriving at the service to the intention leaving it.
     pub latency_ms: f64,
+}
+
+impl IntentionView {
+    /// The view of an intention, its latency not measured (0).
+    #[must_use]
+    pub fn of(intention: &Intention) -> Self {
+        Self {
+            task_id: intention.task_id.clone(),
+            goal_index: intention.goal_index,
+            dlm: intention.dlm,
+            path: intention.path.clone(),
+            stamp_ns: intention.header.stamp_ns,
+            latency_ms: 0.0,
+        }
+    }
 }
 
 /// A robot as the service knows it.

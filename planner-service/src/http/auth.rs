@@ -65,7 +65,7 @@ pub fn resolve_token(
             let token = text.trim().to_string();
             validate_token(&token).map_err(|reason| TokenError::Invalid {
                 path: path.clone(),
-                reason,
+                reason: reason.to_string(),
             })?;
             return Ok((token, TokenSource::Stored(path)));
         }

@@ -78,7 +78,8 @@ impl Server {
     /// [`ServeError`] naming what failed; whatever had started is stopped again.
     pub async fn start(opts: ServeOptions) -> Result<Self, ServeError> {
         let cfg = &opts.config;
-        cfg.validate().map_err(ServeError::Config)?;
+        cfg.validate()
+            .map_err(|e| ServeError::Config(e.to_string()))?;
         let (token, token_source) = resolve_token(cfg.http.token.as_deref(), &opts.data_dir)?;
         let maps_dir = opts.data_dir.join("maps");
         let maps = Arc::new(
@@ -86,7 +87,10 @@ impl Server {
                 .await
                 .map_err(|e| ServeError::Config(format!("map store task failed: {e}")))??,
         );
-        let zenoh_cfg = cfg.zenoh.session_config().map_err(ServeError::Config)?;
+        let zenoh_cfg = cfg
+            .zenoh
+            .session_config()
+            .map_err(|e| ServeError::Config(e.to_string()))?;
         let session = zenoh::open(zenoh_cfg)
             .await
             .map_err(|e| ServeError::Zenoh(e.to_string()))?;

@@ -33,26 +33,41 @@ impl Default for DlmParams {
     }
 }
 
+/// A DLM parameter out of range (the `[dlm]` table).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("invalid dlm.{field} = {value}: {reason}")]
+pub struct DlmParamsError {
+    /// The field inside `[dlm]`, e.g. `window_m`.
+    pub field: &'static str,
+    pub value: f64,
+    pub reason: &'static str,
+}
+
 impl DlmParams {
     /// Checks the fields, naming the first bad one.
     ///
     /// # Errors
-    /// A message naming the field and value.
-    pub fn validate(&self) -> Result<(), String> {
-        for (field, v) in [
+    /// [`DlmParamsError`] naming the field and value.
+    pub fn validate(&self) -> Result<(), DlmParamsError> {
+        for (field, value) in [
             ("window_m", self.window_m),
             ("curvature_threshold_per_m", self.curvature_threshold_per_m),
             ("stop_distance_m", self.stop_distance_m),
         ] {
-            if !v.is_finite() || v < 0.0 {
-                return Err(format!("dlm.{field} = {v}: must be >= 0 and finite"));
+            if !value.is_finite() || value < 0.0 {
+                return Err(DlmParamsError {
+                    field,
+                    value,
+                    reason: "must be >= 0 and finite",
+                });
             }
         }
         if self.window_m <= 0.0 {
-            return Err(format!(
-                "dlm.window_m = {}: must be positive",
-                self.window_m
-            ));
+            return Err(DlmParamsError {
+                field: "window_m",
+                value: self.window_m,
+                reason: "must be positive",
+            });
         }
         Ok(())
     }
@@ -127,6 +142,25 @@ pub fn dlm_from_path(path: &[Pose2D], robot: Pose2D, params: &DlmParams) -> Dlm 
 mod tests {
     use super::*;
     use std::f64::consts::{FRAC_PI_2, PI};
+
+    #[test]
+    fn bad_params_name_the_field_and_value() {
+        DlmParams::default().validate().unwrap();
+        let bad = DlmParams {
+            window_m: 0.0,
+            ..DlmParams::default()
+        };
+        let e = bad.validate().unwrap_err();
+        assert_eq!(e.field, "window_m");
+        assert_eq!(e.to_string(), "invalid dlm.window_m = 0: must be positive");
+        let bad = DlmParams {
+            stop_distance_m: f64::NAN,
+            ..DlmParams::default()
+        };
+        let e = bad.validate().unwrap_err();
+        assert_eq!(e.field, "stop_distance_m");
+        assert!(e.to_string().contains("dlm.stop_distance_m = NaN"), "{e}");
+    }
 
     /// Poses along an arc (positive curvature = left) from `start`, `step` metres apart.
     fn arc(start: Pose2D, curvature: f64, length_m: f64, step: f64) -> Vec<Pose2D> {

@@ -87,15 +87,10 @@ impl Planned {
         send_lpe: bool,
     ) -> Intention {
         Intention {
-            header,
-            task_id,
-            goal_index: u32::try_from(goal_index).unwrap_or(u32::MAX),
-            answers_pose_seq: pose.header.seq,
-            answers_pose_stamp_ns: pose.header.stamp_ns,
-            map: pose.map.clone(),
             path: self.path.clone(),
             dlm: self.dlm,
             lpe: self.lpe.as_ref().filter(|_| send_lpe).and_then(wire_image),
+            ..stop_intention(header, pose, task_id, goal_index)
         }
     }
 }
@@ -151,11 +146,8 @@ impl IntentionPlanner {
     /// [`PlanError::RadiusMismatch`] when the map was inflated for another robot.
     pub fn new(map: Arc<PlanningMap>, config: IntentionConfig) -> Result<Self, PlanError> {
         config.planner.validate()?;
-        config.dlm.validate().map_err(PlanError::InvalidParams)?;
-        config
-            .lpe
-            .validate()
-            .map_err(|e| PlanError::InvalidParams(format!("lpe: {e}")))?;
+        config.dlm.validate()?;
+        config.lpe.validate()?;
         if !(config.goal_tolerance_m.is_finite() && config.goal_tolerance_m > 0.0) {
             return Err(PlanError::invalid_config(
                 "goal_tolerance_m",

@@ -8,7 +8,9 @@
 //! 2. `<root>/.venv/lib/python3*/site-packages/onnxruntime/capi/libonnxruntime.so*`, the PyPI
 //!    `onnxruntime` wheel that `bash scripts/setup.sh` installs, where `<root>` is tried as
 //!    every ancestor of the current directory, then every ancestor of the running executable,
-//!    then the repository this crate was built from (`CARGO_MANIFEST_DIR/..` at build time).
+//!    then the user's data directory ([`protocol::data_dirs::user_data_dir`], e.g.
+//!    `~/.local/share/intention-fleet/.venv/…`). No path of the source tree the binary was
+//!    built from is compiled in: an installed agent finds the library the same way anywhere.
 //!
 //! Otherwise loading fails with [`RuntimeError`], which says to run `bash scripts/setup.sh` or
 //! set `ORT_DYLIB_PATH`.
@@ -66,9 +68,9 @@ pub fn default_search_roots() -> Vec<PathBuf> {
     {
         push_ancestors(&exe_dir);
     }
-    if let Some(repo) = Path::new(env!("CARGO_MANIFEST_DIR")).parent() {
-        if !roots.iter().any(|r| r == repo) {
-            roots.push(repo.to_path_buf());
+    if let Some(data) = protocol::data_dirs::user_data_dir() {
+        if !roots.contains(&data) {
+            roots.push(data);
         }
     }
     roots

@@ -1,0 +1,308 @@
+//! The fleet's Zenoh side: decodes what robots publish (pose, status, camera, liveliness),
+//! hands it to the core, starts a robot's worker when the robot is first registered, and
+//! publishes what the core decided. Also the two background loops: the watchdog and the
+//! publisher of announcements.
+//!
+//! Announcements (task changes, a stop for a robot whose task was cancelled, robot events)
+//! are queued while the core is locked, in the order the core made them, and one publisher
+//! task puts them on Zenoh and the event bus: nothing is published under the lock, and a
+//! subscriber never sees a task's states out of order.
+
+use std::sync::Weak;
+use std::time::{Duration, Instant};
+
+use protocol::keys::{self, RobotTopic};
+use protocol::{
+    AgentStatus, CameraFrame, Intention, PoseEstimate, RobotId, SiteId, TaskEvent, WireMessage,
+};
+use tokio::sync::{broadcast, mpsc, watch};
+use zenoh::pubsub::Subscriber;
+use zenoh::sample::{Sample, SampleKind};
+use zenoh::{Session, Wait};
+
+use super::error::{zenoh_err, FleetError};
+use super::types::{FleetEvent, IntentionView, Task};
+use super::{now_ns, Fleet, Now};
+use crate::fleet::worker::Arrival;
+
+/// Something to publish, made under the core's lock and sent after it.
+#[derive(Debug)]
+pub(super) enum Outgoing {
+    /// A task change: on the task's key and the event bus.
+    Task(Box<(TaskEvent, Task)>),
+    /// An intention that answers no pose (a stop after a cancel), with its view.
+    Intention {
+        robot: RobotId,
+        intention: Box<Intention>,
+        view: IntentionView,
+    },
+    /// A live-stream event only.
+    Event(Box<FleetEvent>),
+}
+
+/// Subscribes the robots' pose, status and camera keys and their liveliness tokens.
+///
+/// # Errors
+/// [`FleetError::Zenoh`].
+pub(super) async fn subscribe(
+    session: &Session,
+    site: &SiteId,
+    fleet: &Weak<Fleet>,
+) -> Result<Vec<Subscriber<()>>, FleetError> {
+    let mut subs = Vec::new();
+    for (topic, action) in [
+        (RobotTopic::Pose, "subscribe poses"),
+        (RobotTopic::Status, "subscribe status"),
+        (RobotTopic::Camera, "subscribe cameras"),
+    ] {
+        let me = fleet.clone();
+        let sub = session
+            .declare_subscriber(keys::all_robots(site, topic))
+            .callback(move |s| {
+                if let Some(f) = me.upgrade() {
+                    match topic {
+                        RobotTopic::Pose => f.on_pose(&s),
+                        RobotTopic::Status => f.on_status(&s),
+                        _ => f.on_camera(&s),
+                    }
+                }
+            })
+            .await
+            .map_err(zenoh_err(action))?;
+        subs.push(sub);
+    }
+    let me = fleet.clone();
+    let alive = session
+        .liveliness()
+        .declare_subscriber(keys::alive_all(site))
+        .history(true)
+        .callback(move |s| {
+            if let Some(f) = me.upgrade() {
+                f.on_liveliness(&s);
+            }
+        })
+        .await
+        .map_err(zenoh_err("subscribe liveliness"))?;
+    subs.push(alive);
+    Ok(subs)
+}
+
+impl Fleet {
+    fn robot_of(&self, sample: &Sample, topic: RobotTopic) -> Option<RobotId> {
+        match keys::parse_robot_key(sample.key_expr().as_str()) {
+            Some((site, id, t)) if site == self.site && t == topic => Some(id),
+            _ => None,
+        }
+    }
+
+    fn on_pose(&self, sample: &Sample) {
+        let Some(id) = self.robot_of(sample, RobotTopic::Pose) else {
+            return;
+        };
+        let pose: PoseEstimate = match protocol::decode_sample(sample) {
+            Ok(p) => p,
+            Err(e) => {
+                tracing::warn!(robot = %id, "ignoring pose: {e}");
+                return;
+            }
+        };
+        let received = Instant::now();
+        let now = Now {
+            at: received,
+            wall_ns: now_ns(),
+        };
+        let watched = self.watched();
+        self.with_state(|state| {
+            let (seen, effects) = state.core.pose_arrived(&id, pose.clone(), now, watched);
+            if seen.new {
+                self.start_worker(state, &id);
+            }
+            if let Some(w) = state.workers.get(&id) {
+                w.send(Arrival { pose, received });
+            }
+            ((), effects)
+        });
+    }
+
+    fn on_status(&self, sample: &Sample) {
+        let Some(id) = self.robot_of(sample, RobotTopic::Status) else {
+            return;
+        };
+        let status: AgentStatus = match protocol::decode_sample(sample) {
+            Ok(s) => s,
+            Err(e) => {
+                tracing::warn!(robot = %id, "ignoring status: {e}");
+                return;
+            }
+        };
+        self.with_state(|state| {
+            let (new, effects) = state.core.status_arrived(&id, status, Now::read());
+            if new {
+                self.start_worker(state, &id);
+            }
+            ((), effects)
+        });
+    }
+
+    fn on_camera(&self, sample: &Sample) {
+        let Some(id) = self.robot_of(sample, RobotTopic::Camera) else {
+            return;
+        };
+        let now = Instant::now();
+        if !self.with_core(|core| (core.registry.camera_due(&id, now), Vec::new())) {
+            return;
+        }
+        // Decoded outside the lock: frames are the biggest messages on the bus.
+        match protocol::decode_sample::<CameraFrame>(sample) {
+            Ok(frame) => {
+                self.with_core(|core| (core.registry.set_camera(&id, frame.image, now), Vec::new()))
+            }
+            Err(e) => tracing::warn!(robot = %id, "ignoring camera frame: {e}"),
+        }
+    }
+
+    fn on_liveliness(&self, sample: &Sample) {
+        let Some(id) = self.robot_of(sample, RobotTopic::Alive) else {
+            return;
+        };
+        match sample.kind() {
+            SampleKind::Put => tracing::info!(robot = %id, "liveliness token appeared"),
+            SampleKind::Delete => {
+                tracing::warn!(robot = %id, "liveliness token gone");
+                let reason = "robot left (its liveliness token is gone)";
+                self.with_core(|core| ((), core.robot_left(&id, reason, Now::read())));
+            }
+        }
+    }
+
+    /// One watchdog round (see [`super::core::Core::watchdog`]).
+    fn watchdog_round(&self) {
+        let counts = self.with_core(|core| core.watchdog(Now::read()));
+        self.metrics.set_robots(counts.online, counts.offline);
+    }
+
+    /// Publishes an intention to its robot from synchronous code (a worker) and counts it;
+    /// `received` is when the answered pose arrived. The view to record, if it went out.
+    pub(super) fn send_intention(
+        &self,
+        robot: &RobotId,
+        intention: &Intention,
+        received: Option<Instant>,
+    ) -> Option<IntentionView> {
+        let key = keys::robot(&self.site, robot, RobotTopic::Intention);
+        if let Err(e) = put_sync(&self.session, &key, intention) {
+            tracing::warn!(robot = %robot, "cannot publish intention: {e}");
+            return None;
+        }
+        let latency = received.map(|r| r.elapsed());
+        if let Some(l) = latency {
+            self.metrics.record_intention(l);
+        }
+        Some(IntentionView {
+            latency_ms: latency.map_or(0.0, |l| l.as_secs_f64() * 1e3),
+            ..IntentionView::of(intention)
+        })
+    }
+
+    /// Streams an intention that went out.
+    pub(super) fn intention_event(&self, robot: &RobotId, intention: IntentionView) {
+        // No receiver is not an error: nobody watches the dashboard.
+        let _ = self.events.send(FleetEvent::Intention {
+            robot_id: robot.clone(),
+            intention,
+        });
+    }
+}
+
+/// Puts the announcements in the order they were made (see the module docs), until the fleet
+/// is gone or shut down.
+pub(super) async fn publisher(
+    session: Session,
+    site: SiteId,
+    mut outgoing: mpsc::UnboundedReceiver<Outgoing>,
+    events: broadcast::Sender<FleetEvent>,
+) {
+    while let Some(out) = outgoing.recv().await {
+        // No receiver on the event bus is not an error: nobody watches the dashboard.
+        match out {
+            Outgoing::Task(change) => {
+                let (event, task) = *change;
+                let key = keys::task(&site, &task.id);
+                if let Err(e) = put(&session, &key, &event).await {
+                    tracing::warn!(task = %task.id, "cannot publish task event: {e}");
+                }
+                let _ = events.send(FleetEvent::Task(task));
+            }
+            Outgoing::Intention {
+                robot,
+                intention,
+                view,
+            } => {
+                let key = keys::robot(&site, &robot, RobotTopic::Intention);
+                match put(&session, &key, intention.as_ref()).await {
+                    Ok(()) => {
+                        let _ = events.send(FleetEvent::Intention {
+                            robot_id: robot,
+                            intention: view,
+                        });
+                    }
+                    Err(e) => tracing::warn!(robot = %robot, "cannot publish intention: {e}"),
+                }
+            }
+            Outgoing::Event(event) => {
+                let _ = events.send(*event);
+            }
+        }
+    }
+}
+
+/// Every 200 ms: silent robots go offline, long-paused tasks fail, queued tasks are dispatched.
+pub(super) async fn watchdog(fleet: Weak<Fleet>, mut shutdown: watch::Receiver<bool>) {
+    let mut tick = tokio::time::interval(Duration::from_millis(200));
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    loop {
+        tokio::select! {
+            _ = tick.tick() => {}
+            _ = shutdown.changed() => break,
+        }
+        let Some(f) = fleet.upgrade() else {
+            break;
+        };
+        // The watchdog writes to the task store: keep it off the async workers.
+        if let Err(e) = tokio::task::spawn_blocking(move || f.watchdog_round()).await {
+            tracing::error!("watchdog round failed: {e}");
+        }
+    }
+}
+
+fn encode<M: WireMessage>(msg: &M) -> Result<Vec<u8>, FleetError> {
+    protocol::encode(msg).map_err(|e| FleetError::Zenoh {
+        action: "encode",
+        reason: e.to_string(),
+    })
+}
+
+/// Encodes and puts a message from synchronous code (the blocking pool).
+fn put_sync<M: WireMessage>(
+    session: &Session,
+    key: &zenoh::key_expr::OwnedKeyExpr,
+    msg: &M,
+) -> Result<(), FleetError> {
+    session
+        .put(key, encode(msg)?)
+        .encoding(protocol::zenoh_io::encoding_for::<M>())
+        .wait()
+        .map_err(zenoh_err("put"))
+}
+
+async fn put<M: WireMessage>(
+    session: &Session,
+    key: &zenoh::key_expr::OwnedKeyExpr,
+    msg: &M,
+) -> Result<(), FleetError> {
+    session
+        .put(key, encode(msg)?)
+        .encoding(protocol::zenoh_io::encoding_for::<M>())
+        .await
+        .map_err(zenoh_err("put"))
+}
