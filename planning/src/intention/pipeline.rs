@@ -13,7 +13,7 @@ use protocol::{Dlm, Header, Image, ImageEncoding, Intention, Pose2D, PoseEstimat
 use serde::{Deserialize, Serialize};
 
 use crate::config::PlannerConfig;
-use crate::error::PlanError;
+use crate::error::{Endpoint, PlanError};
 use crate::goals::{Advance, GoalProgress};
 use crate::hybrid_astar::Planner;
 use crate::intention::dlm::{dlm_from_path, DlmParams};
@@ -253,7 +253,23 @@ impl IntentionPlanner {
         } else {
             &mut self.fixed
         };
-        let path = planner.plan(robot, goal)?;
+        let path = match planner.plan(robot, goal) {
+            // A pose estimate that grazes a wall (a cut corner, a few cm of AMCL error) is no
+            // reason to stop for good: plan from the nearest free pose and lead there first.
+            Err(
+                e @ PlanError::InCollision {
+                    which: Endpoint::Start,
+                    ..
+                },
+            ) => {
+                let free = nearest_free_start(planner.map(), robot).ok_or(e)?;
+                let mut path = planner.plan(free, goal)?;
+                path.poses.insert(0, robot);
+                path.length_m += robot.distance_m(&free);
+                path
+            }
+            other => other?,
+        };
         let dlm = dlm_from_path(&path.poses, robot, &self.config.dlm);
         let lpe = if render_lpe {
             let trail: Vec<Pose2D> = self.trail.iter().copied().collect();
@@ -276,6 +292,29 @@ impl IntentionPlanner {
             lpe,
         })
     }
+}
+
+/// How far from an estimate inside the inflated obstacles the pipeline looks for a free start.
+pub const START_RESCUE_M: f64 = 0.3;
+
+/// The free pose nearest to `robot` within [`START_RESCUE_M`] (same heading), searched on
+/// rings one map cell apart.
+fn nearest_free_start(map: &PlanningMap, robot: Pose2D) -> Option<Pose2D> {
+    let step_m = map.grid().resolution_m();
+    let rings = (START_RESCUE_M / step_m).ceil() as usize;
+    (1..=rings).find_map(|k| {
+        let r = k as f64 * step_m;
+        let n = (std::f64::consts::TAU * r / step_m).ceil().max(8.0) as usize;
+        (0..n).find_map(|i| {
+            let a = std::f64::consts::TAU * i as f64 / n as f64;
+            let p = Pose2D::new(
+                robot.x_m + r * a.cos(),
+                robot.y_m + r * a.sin(),
+                robot.yaw_rad,
+            );
+            map.check_endpoint(Endpoint::Start, p).ok().map(|_| p)
+        })
+    })
 }
 
 fn render_lpe_image(
