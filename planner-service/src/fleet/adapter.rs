@@ -95,16 +95,26 @@ impl Fleet {
         }
     }
 
-    fn on_pose(&self, sample: &Sample) {
-        let Some(id) = self.robot_of(sample, RobotTopic::Pose) else {
-            return;
-        };
-        let pose: PoseEstimate = match protocol::decode_sample(sample) {
-            Ok(p) => p,
+    /// The robot a sample of `topic` is from and its decoded message; a sample of another
+    /// site or topic is skipped, one that does not decode is logged and skipped.
+    fn robot_message<M: protocol::WireMessage>(
+        &self,
+        sample: &Sample,
+        topic: RobotTopic,
+    ) -> Option<(RobotId, M)> {
+        let id = self.robot_of(sample, topic)?;
+        match protocol::decode_sample(sample) {
+            Ok(m) => Some((id, m)),
             Err(e) => {
-                tracing::warn!(robot = %id, "ignoring pose: {e}");
-                return;
+                tracing::warn!(robot = %id, "ignoring {topic:?}: {e}");
+                None
             }
+        }
+    }
+
+    fn on_pose(&self, sample: &Sample) {
+        let Some((id, pose)) = self.robot_message::<PoseEstimate>(sample, RobotTopic::Pose) else {
+            return;
         };
         let received = Instant::now();
         let now = Now {
@@ -125,15 +135,9 @@ impl Fleet {
     }
 
     fn on_status(&self, sample: &Sample) {
-        let Some(id) = self.robot_of(sample, RobotTopic::Status) else {
+        let Some((id, status)) = self.robot_message::<AgentStatus>(sample, RobotTopic::Status)
+        else {
             return;
-        };
-        let status: AgentStatus = match protocol::decode_sample(sample) {
-            Ok(s) => s,
-            Err(e) => {
-                tracing::warn!(robot = %id, "ignoring status: {e}");
-                return;
-            }
         };
         self.with_state(|state| {
             let (new, effects) = state.core.status_arrived(&id, status, Now::read());
