@@ -3,6 +3,10 @@
 //! `eval amcl-accuracy [--tasks a,b,c,d,e] [--seed N] [--out results.json]`: AMCL against the
 //! simulator's ground truth on tasks A–E (see [`crate::amcl_accuracy`]); prints a markdown
 //! table and writes the figures as JSON.
+//!
+//! `eval table [--tasks a,b,c,d,e] [--scenario FILE]... [--behaviour] [--methods LIST]
+//! [--seeds N] [--models DIR] [--jobs N] --out DIR`: the paper's Table 1 and Figure 5 in
+//! closed loop (see [`crate::table`]).
 
 use std::path::PathBuf;
 
@@ -11,6 +15,7 @@ use clap::{Parser, Subcommand};
 use robot_agent::{AgentConfig, ControllerKind};
 
 use crate::amcl_accuracy::{self, AccuracyOptions, TaskAccuracy};
+use crate::table::{self, TableOptions};
 
 /// Closed-loop evaluation of the intention fleet in the simulator.
 #[derive(Debug, Parser)]
@@ -22,6 +27,8 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Cmd {
+    /// The paper's Table 1 and Figure 5: every scenario × method × seed in lock-step closed loop.
+    Table(TableArgs),
     /// AMCL accuracy against the simulator's ground truth on tasks A–E (lock-step).
     AmclAccuracy {
         /// Comma-separated task letters.
@@ -49,12 +56,233 @@ pub enum Cmd {
     },
 }
 
+/// The methods `eval table` runs when `--methods` is not given: the ones without a model, and
+/// each network whose model file is in the models folder.
+fn default_methods(models_dir: &std::path::Path) -> (Vec<ControllerKind>, Vec<String>) {
+    let mut methods = Vec::new();
+    let mut skipped = Vec::new();
+    for kind in ControllerKind::ALL {
+        let model = models_dir.join(format!("{kind}.onnx"));
+        if kind.needs_model() && !model.is_file() {
+            skipped.push(format!("{kind} (no {})", model.display()));
+        } else {
+            methods.push(kind);
+        }
+    }
+    (methods, skipped)
+}
+
+/// Arguments of `eval table`.
+#[derive(Debug, clap::Args)]
+pub struct TableArgs {
+    /// Comma-separated task letters (default: a,b,c,d,e unless --scenario is given).
+    #[arg(long, value_delimiter = ',')]
+    tasks: Option<Vec<String>>,
+    /// Any scenario file, in addition to the tasks (repeatable).
+    #[arg(long)]
+    scenario: Vec<PathBuf>,
+    /// Add every behaviour scenario (`behaviour_*.yaml` of the scenarios folder).
+    #[arg(long)]
+    behaviour: bool,
+    /// Comma-separated methods: dlm, lpe, none, path-tracker, dynamic-window, expert (default:
+    /// every method whose model, if it needs one, is in the models folder).
+    #[arg(long, value_delimiter = ',')]
+    methods: Option<Vec<ControllerKind>>,
+    /// Seeds 0..N per scenario × method (seed 0: the scenario's own noise).
+    #[arg(long, default_value_t = 5)]
+    seeds: u64,
+    /// Folder of dlm.onnx, lpe.onnx, none.onnx (default: $FLEET_MODELS_DIR, ./models or the
+    /// user data directory).
+    #[arg(long)]
+    models: Option<PathBuf>,
+    /// Runs in parallel (default: the number of cores).
+    #[arg(long)]
+    jobs: Option<usize>,
+    /// Output folder: runs.json, table.json, table.md, figures/.
+    #[arg(long)]
+    out: PathBuf,
+    /// Agent configuration TOML (its [amcl], [limits], [safety] and controller tables).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Folder of the task and behaviour scenarios (default: $FLEET_SCENARIOS_DIR,
+    /// ./sim/scenarios, ./scenarios or the user data directory).
+    #[arg(long)]
+    scenarios: Option<PathBuf>,
+    /// Seconds without progress before the human intervenes.
+    #[arg(long, default_value_t = 10.0)]
+    stuck_timeout_s: f64,
+    /// A run with more interventions than this fails.
+    #[arg(long, default_value_t = 30)]
+    max_interventions: u32,
+}
+
+fn read_agent_config(config: Option<&std::path::Path>) -> anyhow::Result<AgentConfig> {
+    match config {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("cannot read {}", path.display()))?;
+            AgentConfig::from_toml(&text).with_context(|| format!("config {}", path.display()))
+        }
+        None => Ok(AgentConfig::default()),
+    }
+}
+
+fn run_table(args: &TableArgs) -> anyhow::Result<()> {
+    if args.seeds == 0 {
+        anyhow::bail!("invalid --seeds 0: need at least one seed");
+    }
+    if args.jobs == Some(0) {
+        anyhow::bail!("invalid --jobs 0: need at least one job");
+    }
+    let agent = read_agent_config(args.config.as_deref())?;
+    let models_dir = match &args.models {
+        Some(dir) => dir.clone(),
+        None => {
+            protocol::data_dirs::find_models_dir(None).unwrap_or_else(|_| PathBuf::from("models"))
+        }
+    };
+    let methods = match &args.methods {
+        Some(m) if m.is_empty() => anyhow::bail!("invalid --methods: empty list"),
+        Some(m) => m.clone(),
+        None => {
+            let (methods, skipped) = default_methods(&models_dir);
+            if !skipped.is_empty() {
+                eprintln!("not running {}", skipped.join(", "));
+            }
+            methods
+        }
+    };
+    let mut paths: Vec<PathBuf> = Vec::new();
+    let tasks: Vec<String> = match &args.tasks {
+        Some(t) => t.clone(),
+        None if args.scenario.is_empty() => ["a", "b", "c", "d", "e"].map(String::from).to_vec(),
+        None => Vec::new(),
+    };
+    if !tasks.is_empty() || args.behaviour {
+        let dir = protocol::data_dirs::find_scenarios_dir(args.scenarios.as_deref())?;
+        for t in &tasks {
+            paths.push(table::task_scenario(&dir, t)?);
+        }
+        if args.behaviour {
+            let mut found: Vec<PathBuf> = std::fs::read_dir(&dir)
+                .with_context(|| format!("cannot list {}", dir.display()))?
+                .filter_map(Result::ok)
+                .map(|e| e.path())
+                .filter(|p| {
+                    p.file_name()
+                        .and_then(|n| n.to_str())
+                        .is_some_and(|n| n.starts_with("behaviour_") && n.ends_with(".yaml"))
+                })
+                .collect();
+            found.sort();
+            if found.is_empty() {
+                anyhow::bail!("--behaviour: no behaviour_*.yaml in {}", dir.display());
+            }
+            paths.extend(found);
+        }
+    }
+    paths.extend(args.scenario.iter().cloned());
+    let options = TableOptions {
+        stuck_timeout_s: args.stuck_timeout_s,
+        max_interventions: args.max_interventions,
+        agent,
+        models_dir,
+        ..TableOptions::default()
+    };
+    options.validate(&methods)?;
+    let seeds: Vec<u64> = (0..args.seeds).collect();
+    let jobs = args.jobs.unwrap_or_else(|| {
+        std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
+    });
+    let prepared = table::prepare(&paths, &options)?;
+    let runs = table::plan_runs(prepared.len(), &methods, &seeds);
+    eprintln!(
+        "{} scenarios × {} methods × {} seeds = {} runs on {jobs} jobs",
+        prepared.len(),
+        methods.len(),
+        seeds.len(),
+        runs.len()
+    );
+    let bar = indicatif::ProgressBar::new(runs.len() as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "[{elapsed_precise}] [{bar:40}] {pos}/{len} runs {msg}",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let started = std::time::Instant::now();
+    let simulated = std::sync::Mutex::new(0.0f64);
+    let ticks = std::sync::atomic::AtomicU64::new(0);
+    let outcome = table::run_all(&prepared, &runs, &options, jobs, &|p| match p {
+        table::Progress::Simulated(s) => {
+            let mut total = simulated
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+            *total += s;
+            // A message every 200 cycles is plenty for the eye.
+            if ticks
+                .fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+                .is_multiple_of(200)
+            {
+                let wall = started.elapsed().as_secs_f64().max(1e-3);
+                bar.set_message(format!(
+                    "{:.0} sim-s, real-time factor {:.1}",
+                    *total,
+                    *total / wall
+                ));
+            }
+        }
+        table::Progress::Finished(r) => {
+            bar.inc(1);
+            bar.println(format!(
+                "{} {} seed {}: {} ({} interventions, {} collisions, {:.0} s, {:.1} s wall)",
+                r.scenario,
+                r.method,
+                r.seed,
+                if r.success {
+                    "success"
+                } else {
+                    r.failure.as_deref().unwrap_or("failed")
+                },
+                r.interventions,
+                r.collisions.total(),
+                r.time_s,
+                r.wall_s
+            ));
+        }
+    })?;
+    bar.finish_and_clear();
+    let wall_s = started.elapsed().as_secs_f64();
+    let simulated_s = *simulated
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    let results: Vec<table::RunResult> = outcome.iter().map(|(r, _)| r.clone()).collect();
+    let summary = table::report::Table {
+        seeds,
+        methods,
+        rows: table::report::rows(&results),
+        simulated_s,
+        wall_s,
+        jobs,
+    };
+    table::report::write_tables(&args.out, &results, &summary)?;
+    table::report::write_figures(&args.out, &prepared, &summary.methods, &outcome)?;
+    println!("{}", table::report::markdown(&summary));
+    println!(
+        "wrote {}/{{runs.json,table.json,table.md,figures/}}; real-time factor {:.1} ({simulated_s:.0} simulated s in {wall_s:.0} s)",
+        args.out.display(),
+        summary.real_time_factor()
+    );
+    Ok(())
+}
+
 /// Runs a command.
 ///
 /// # Errors
 /// Bad arguments (naming the flag and value), unreadable files, failed runs.
 pub fn run(cli: &Cli) -> anyhow::Result<()> {
     match &cli.command {
+        Cmd::Table(args) => run_table(args),
         Cmd::AmclAccuracy {
             tasks,
             seed,
@@ -64,20 +292,7 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
             scenarios,
             max_sim_s,
         } => {
-            let agent = match config {
-                Some(path) => {
-                    let text = std::fs::read_to_string(path)
-                        .with_context(|| format!("cannot read {}", path.display()))?;
-                    AgentConfig::from_toml(&text)
-                        .with_context(|| format!("config {}", path.display()))?
-                }
-                None => AgentConfig::default(),
-            };
-            if let Some(s) = max_sim_s {
-                if !(s.is_finite() && *s > 0.0) {
-                    anyhow::bail!("invalid --max-sim-s {s}: must be a positive number");
-                }
-            }
+            let agent = read_agent_config(config.as_deref())?;
             let scenarios = protocol::data_dirs::find_scenarios_dir(scenarios.as_deref())?;
             let paths = tasks
                 .iter()
@@ -86,31 +301,27 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
             let options = AccuracyOptions {
                 seed: *seed,
                 controller: *controller,
-                max_sim_s: *max_sim_s,
-                agent,
-                ..AccuracyOptions::default()
+                run: TableOptions {
+                    time_limit_s: *max_sim_s,
+                    agent,
+                    ..TableOptions::default()
+                },
             };
             let mut results: Vec<TaskAccuracy> = Vec::new();
             for path in &paths {
                 let bar = indicatif::ProgressBar::new(1000);
                 bar.set_style(
-                    indicatif::ProgressStyle::with_template(
-                        "{prefix:>8} [{bar:40}] {pos:>4}/{len} sim-s {msg}",
-                    )
-                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+                    indicatif::ProgressStyle::with_template("{prefix:>8} {pos:>4} sim-s {msg}")
+                        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
                 );
                 bar.set_prefix(
                     path.file_stem()
                         .map(|s| s.to_string_lossy().into_owned())
                         .unwrap_or_default(),
                 );
-                let result = amcl_accuracy::run_task(path, &options, |t_s, limit_s, goals| {
+                let result = amcl_accuracy::run_task(path, &options, |t_s| {
                     #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-                    {
-                        bar.set_length(limit_s.ceil() as u64);
-                        bar.set_position(t_s as u64);
-                    }
-                    bar.set_message(format!("goals reached {goals}"));
+                    bar.set_position(t_s as u64);
                 })?;
                 bar.finish_and_clear();
                 results.push(result);

@@ -2,8 +2,14 @@
 //!
 //! - [`metrics`]: the metrics of Table 1.
 //! - [`amcl_accuracy`]: AMCL against the simulator's ground truth on tasks A–E, in lock-step.
+//! - [`expert`]: the privileged expert (method `expert`) that reads the ground truth and
+//!   demonstrates for imitation.
+//! - [`figure`]: pictures of runs like the paper's Figure 5 (plan, planned path, traces).
 //! - [`cli`]: the `eval` command line.
 
 pub mod amcl_accuracy;
 pub mod cli;
+pub mod expert;
+pub mod figure;
 pub mod metrics;
+pub mod table;

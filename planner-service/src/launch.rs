@@ -52,6 +52,8 @@ pub enum LaunchError {
     RobotCount { want: usize, got: usize },
     #[error("invalid robots = 0: need at least one robot")]
     NoRobots,
+    #[error("invalid controllers = {0}: it reads the simulator's ground truth, so no agent runs it (only `eval` does)")]
+    NotDeployable(ControllerKind),
     #[error("controller {controller} needs a model: {source}")]
     ModelsDir {
         controller: ControllerKind,
@@ -376,6 +378,9 @@ impl Robots {
     pub fn start(spec: &RobotsSpec) -> Result<Self, LaunchError> {
         if spec.robots == 0 {
             return Err(LaunchError::NoRobots);
+        }
+        if let Some(kind) = spec.controllers.iter().find(|k| !k.deployable()) {
+            return Err(LaunchError::NotDeployable(*kind));
         }
         let sim_bin = binary(&spec.bin_dir, "sim")?;
         let agent_bin = binary(&spec.bin_dir, "robot-agent")?;

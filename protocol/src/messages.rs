@@ -568,16 +568,21 @@ pub enum ControllerKind {
     /// Dynamic window approach on the laser scan and the planned path.
     #[serde(alias = "dynamic_window")]
     DynamicWindow,
+    /// The privileged demonstrator of the evaluation and recording harness (`eval`): it reads
+    /// the simulator's ground truth (true pose, every obstacle, people's velocities), so no
+    /// deployed agent can run it; an agent configuration naming it is refused.
+    Expert,
 }
 
 impl ControllerKind {
     /// Every kind, in the order the command line lists them.
-    pub const ALL: [ControllerKind; 5] = [
+    pub const ALL: [ControllerKind; 6] = [
         Self::Dlm,
         Self::Lpe,
         Self::None,
         Self::PathTracker,
         Self::DynamicWindow,
+        Self::Expert,
     ];
 
     /// The name used in the configuration file and on the command line.
@@ -589,7 +594,21 @@ impl ControllerKind {
             Self::None => "none",
             Self::PathTracker => "path-tracker",
             Self::DynamicWindow => "dynamic-window",
+            Self::Expert => "expert",
         }
+    }
+
+    /// Whether a robot agent can run this controller (every kind but the privileged expert,
+    /// which needs the simulator's ground truth).
+    #[must_use]
+    pub fn deployable(self) -> bool {
+        self != Self::Expert
+    }
+
+    /// Whether this controller reads the camera image.
+    #[must_use]
+    pub fn reads_camera(self) -> bool {
+        self.needs_model()
     }
 
     /// Whether this controller reads LPE images, so the planner must send them.
@@ -613,7 +632,7 @@ impl std::fmt::Display for ControllerKind {
 
 /// A controller name that is none of [`ControllerKind::ALL`].
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("unknown controller `{0}`: expected one of dlm, lpe, none, path-tracker, dynamic-window")]
+#[error("unknown controller `{0}`: expected one of dlm, lpe, none, path-tracker, dynamic-window, expert")]
 pub struct UnknownController(pub String);
 
 impl std::str::FromStr for ControllerKind {

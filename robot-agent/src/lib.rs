@@ -15,4 +15,4 @@ pub mod node;
 pub use amcl::{Amcl, AmclConfig, Estimate, LikelihoodField, UpdateOutcome};
 pub use config::{AgentConfig, ControllerKind, Limits, Localization, Safety};
 pub use controllers::{Control, ControlInput, Controller, ControllerError};
-pub use node::{NodeError, NodeOptions, Supervisor};
+pub use node::{make_controller, NodeError, NodeOptions, Supervisor};

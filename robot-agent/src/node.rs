@@ -102,6 +102,14 @@ pub fn make_controller(config: &AgentConfig) -> Result<Box<dyn Controller>, Node
             };
             Box::new(IntentionNet::from_config(config, &options)?)
         }
+        ControllerKind::Expert => {
+            return Err(NodeError::Config(ConfigError::Invalid {
+                field: "controller",
+                value: "expert".into(),
+                reason: "the privileged expert reads the simulator's ground truth; only `eval` \
+                         runs it",
+            }))
+        }
     })
 }
 
@@ -268,6 +276,19 @@ impl Supervisor {
     #[must_use]
     pub fn localized(&self) -> bool {
         self.position_std_m() <= self.config.safety.max_position_std_m
+    }
+
+    /// Re-initialises localization at `pose` with a row-major 3×3 covariance (x, y, yaw), as an
+    /// operator who carried the robot (or RViz's "2D pose estimate") sets it. The held intention
+    /// answered a pose elsewhere and is dropped, and the controller starts afresh.
+    ///
+    /// # Errors
+    /// [`NodeError::Amcl`] for a non-finite pose or covariance; nothing is changed then.
+    pub fn set_pose(&mut self, pose: Pose2D, covariance: [f64; 9]) -> Result<(), NodeError> {
+        self.amcl.set_initial_pose(pose, covariance)?;
+        self.intention = None;
+        self.controller.reset();
+        Ok(())
     }
 
     /// Remembers an odometry reading.

@@ -5,6 +5,8 @@
 //! regenerates them and compares with the committed files. Plans start solid and corridors and
 //! rooms are carved out (≥ 1.5 m wide, mostly 2 m); the maze of task E comes from a recursive
 //! backtracker with a fixed seed. Scenarios add what the plans lack: furniture, glass, people.
+//! The behaviour checks of the paper's §4.2 (a glass door, a person oncoming or ahead) each put
+//! one such thing in a plain corridor, so a run's outcome says how the robot met it.
 
 use std::path::Path;
 
@@ -301,6 +303,28 @@ fn maze() -> Plan {
     p
 }
 
+/// The behaviour plan's straight corridor, 2.4 m wide and 26 m long (x 1..27, y 4.0..6.4); a
+/// room off each side makes it look like a building rather than a tube.
+pub const CORRIDOR_Y0_M: f64 = 4.0;
+pub const CORRIDOR_Y1_M: f64 = 6.4;
+/// Where the corridor ends in the west and the east.
+pub const CORRIDOR_X0_M: f64 = 1.0;
+pub const CORRIDOR_X1_M: f64 = 27.0;
+/// The north room's door (centre x) at the corridor's east end.
+const NORTH_DOOR_X_M: f64 = 22.5;
+
+fn corridor() -> Plan {
+    let mut p = Plan::solid("corridor", 28.0, 12.0);
+    p.carve(CORRIDOR_X0_M, CORRIDOR_Y0_M, CORRIDOR_X1_M, CORRIDOR_Y1_M)
+        // South room near the start.
+        .carve(4.0, 1.0, 10.0, 3.4)
+        .carve(6.2, 3.3, 7.8, 4.1)
+        // North room near the east end.
+        .carve(19.0, 7.0, 26.0, 11.0)
+        .carve(NORTH_DOOR_X_M - 0.8, 6.3, NORTH_DOOR_X_M + 0.8, 7.1);
+    p
+}
+
 /// Every generated plan.
 pub fn plans() -> Vec<Plan> {
     vec![
@@ -312,6 +336,7 @@ pub fn plans() -> Vec<Plan> {
         lab(),
         campus(),
         maze(),
+        corridor(),
     ]
 }
 
@@ -359,6 +384,15 @@ fn pane(x0_m: f64, y0_m: f64, x1_m: f64, y1_m: f64) -> GlassSpec {
 fn glass_door_x(x: f64, y0: f64, y1: f64) -> [GlassSpec; 2] {
     let mid = 0.5 * (y0 + y1);
     [pane(x, y0, x, mid - 0.6), pane(x, mid + 0.6, x, y1)]
+}
+
+/// A glass door across a corridor with its 1.2 m leaf shut: nothing gets through.
+fn closed_glass_door_x(x: f64, y0: f64, y1: f64) -> [GlassSpec; 3] {
+    // Rounded to the millimetre so the YAML reads 4.6, not 4.6000000000000005.
+    let mm = |v: f64| (v * 1000.0).round() / 1000.0;
+    let mid = 0.5 * (y0 + y1);
+    let (l0, l1) = (mm(mid - 0.6), mm(mid + 0.6));
+    [pane(x, y0, x, l0), pane(x, l0, x, l1), pane(x, l1, x, y1)]
 }
 
 fn glass_door_y(y: f64, x0: f64, x1: f64) -> [GlassSpec; 2] {
@@ -438,6 +472,7 @@ fn scenario(
         furniture,
         glass,
         people,
+        expect_goals_reached: true,
     }
 }
 
@@ -739,7 +774,118 @@ fn maze_look() -> AppearanceSpec {
     }
 }
 
-/// Every shipped scenario: tasks A–E (evaluation) and the training environments.
+fn corridor_look() -> AppearanceSpec {
+    AppearanceSpec {
+        default: look(
+            [215, 210, 195],
+            WallTexture::Panels,
+            [135, 130, 120],
+            FloorTexture::Tiles,
+            [235, 235, 228],
+            1.05,
+        ),
+        areas: vec![
+            area(
+                "south room",
+                3.5,
+                0.5,
+                10.5,
+                3.7,
+                look(
+                    [190, 205, 185],
+                    WallTexture::Plain,
+                    [110, 95, 80],
+                    FloorTexture::Planks,
+                    [230, 230, 225],
+                    1.0,
+                ),
+            ),
+            area(
+                "north room",
+                18.5,
+                6.7,
+                26.5,
+                11.5,
+                look(
+                    [200, 195, 225],
+                    WallTexture::Plain,
+                    [85, 85, 110],
+                    FloorTexture::Carpet,
+                    [235, 235, 240],
+                    1.1,
+                ),
+            ),
+        ],
+    }
+}
+
+/// The behaviour checks of the paper's §4.2 on the corridor plan: one situation each, the robot
+/// starting at the west end facing east along the corridor's centre line.
+fn behaviour_scenarios() -> Vec<Scenario> {
+    let mid_y = 0.5 * (CORRIDOR_Y0_M + CORRIDOR_Y1_M);
+    let behaviour = |name: &'static str,
+                     description: &'static str,
+                     seed: u64,
+                     goal_x_m: f64,
+                     time_limit_s: f64| {
+        let mut s = scenario(
+            Base {
+                name,
+                description,
+                role: Role::Behaviour,
+                map: "corridor",
+                seed,
+                start: pose(2.0, mid_y, 0.0),
+                goals: vec![pt(goal_x_m, mid_y)],
+                appearance: corridor_look(),
+            },
+            vec![],
+            vec![],
+            vec![],
+        );
+        s.time_limit_s = time_limit_s;
+        s
+    };
+    let mut glass = behaviour(
+        "behaviour_glass_door",
+        "Behaviour: an unmapped glass door, shut, closes the corridor; stop before it, no contact",
+        301,
+        24.0,
+        60.0,
+    );
+    glass.glass = closed_glass_door_x(14.0, CORRIDOR_Y0_M, CORRIDOR_Y1_M).to_vec();
+    glass.expect_goals_reached = false;
+    // The person starts 22 m away and walks the centre line towards the start, so a robot that
+    // keeps to the middle meets them head-on halfway; they turn 1 m short of the start, by when a
+    // right run has passed them, and turn back 1.5 m short of the goal.
+    let mut oncoming = behaviour(
+        "behaviour_person_oncoming",
+        "Behaviour: a person walks towards the robot down the corridor; reach the goal, no contact",
+        302,
+        25.5,
+        90.0,
+    );
+    oncoming.people = vec![person(&[(24.0, mid_y), (3.0, mid_y)], 0.6, [180, 40, 40])];
+    // The person starts 2.5 m ahead and walks the centre line away from the robot at 0.3 m/s,
+    // under half the robot's 0.7 m/s, then turns into the north room short of the goal, so a
+    // follower is held up for about a minute and never has them walk back into it.
+    let mut ahead = behaviour(
+        "behaviour_person_ahead",
+        "Behaviour: a person walks ahead of the robot, slower than it; follow, no contact",
+        303,
+        25.5,
+        150.0,
+    );
+    ahead.people = vec![person(
+        &[(4.5, mid_y), (NORTH_DOOR_X_M, mid_y), (NORTH_DOOR_X_M, 9.0)],
+        0.3,
+        [40, 120, 60],
+    )];
+    vec![glass, oncoming, ahead]
+}
+
+/// Every shipped scenario: tasks A–E (evaluation), the training environments and the behaviour
+/// checks.
 #[allow(clippy::too_many_lines, clippy::vec_init_then_push)]
 pub fn scenarios() -> Vec<Scenario> {
     use std::f64::consts::{FRAC_PI_2, PI};
@@ -1006,6 +1152,7 @@ pub fn scenarios() -> Vec<Scenario> {
         glass_door_y(11.0, 14.0, 16.0).to_vec(),
         vec![person(&[(4.0, 17.0), (26.0, 17.0)], 0.6, [220, 220, 60])],
     ));
+    out.extend(behaviour_scenarios());
     out
 }
 

@@ -271,7 +271,8 @@ pub struct Scenario {
     pub name: String,
     #[serde(default)]
     pub description: String,
-    /// Whether the scenario is for training (demonstrations) or evaluation (tasks A–E).
+    /// Whether the scenario is for training (demonstrations), evaluation (tasks A–E) or a
+    /// behaviour check (§4.2: people, glass doors).
     pub role: Role,
     /// ROS map YAML of the crude floor plan, relative to the scenario file.
     pub floor_plan: String,
@@ -291,6 +292,22 @@ pub struct Scenario {
     pub glass: Vec<GlassSpec>,
     #[serde(default)]
     pub people: Vec<PersonSpec>,
+    /// What a right run does with the goals, so a harness can judge it. `true` (the default):
+    /// it reaches every goal in order. `false`: the way to the goals is closed in the ground truth
+    /// (e.g. by an unmapped glass door) though open on the plan, and a right run reaches none of
+    /// them: it stops short of the obstacle, touches nothing and ends at the time limit.
+    #[serde(default = "default_true", skip_serializing_if = "is_true")]
+    pub expect_goals_reached: bool,
+}
+
+fn default_true() -> bool {
+    true
+}
+
+// serde's `skip_serializing_if` passes a reference.
+#[allow(clippy::trivially_copy_pass_by_ref)]
+fn is_true(v: &bool) -> bool {
+    *v
 }
 
 /// What a scenario is for.
@@ -299,6 +316,9 @@ pub struct Scenario {
 pub enum Role {
     Training,
     Evaluation,
+    /// One situation of the paper's §4.2 (a person ahead or oncoming, a glass door) whose right
+    /// response `expect_goals_reached` and the absence of contact define.
+    Behaviour,
 }
 
 fn check_finite(field: &str, v: f64) -> Result<(), ScenarioError> {

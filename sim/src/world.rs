@@ -116,6 +116,22 @@ pub struct Person {
 }
 
 impl Person {
+    /// The walking velocity (vx, vy) in m/s the route gives now: the walking speed towards the
+    /// route point being walked to (past it, towards the next one). A person who steps aside
+    /// from a robot or waits for one deviates from it for that step; a route of one point
+    /// gives zero.
+    pub fn velocity_mps(&self) -> (f64, f64) {
+        // A short look ahead along the route also covers standing exactly on a route point.
+        const PROBE_M: f64 = 0.01;
+        let (x, y, _, _) = self.advanced(PROBE_M);
+        let (dx, dy) = (x - self.x_m, y - self.y_m);
+        let d = dx.hypot(dy);
+        if d < 1e-12 {
+            return (0.0, 0.0);
+        }
+        (dx / d * self.speed_mps, dy / d * self.speed_mps)
+    }
+
     /// Where the person would be after walking `dist` (route following, no blocking).
     fn advanced(&self, mut dist: f64) -> (f64, f64, usize, bool) {
         let (mut x, mut y, mut target, mut forward) =
@@ -348,6 +364,12 @@ impl World {
     /// The TRUE pose of robot `index`: for the evaluation harness and tools only.
     pub fn ground_truth_pose(&self, index: usize) -> Option<Pose2D> {
         self.robots.get(index).map(|r| r.pose)
+    }
+
+    /// The TRUE speed and turn rate (v, ω) of robot `index` after the last step: for the
+    /// evaluation harness and its privileged expert only.
+    pub fn ground_truth_velocity(&self, index: usize) -> Option<(f64, f64)> {
+        self.robots.get(index).map(|r| (r.v_mps, r.omega_radps))
     }
 
     /// What a disc at (x, y) of radius `r` overlaps, ignoring robot `skip_robot` and people

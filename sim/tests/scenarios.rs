@@ -1,5 +1,7 @@
 //! Shipped scenarios, maps, schema and fixtures: generated files up to date, schema valid,
-//! goals free and reachable on the plan and in the ground truth, task maps kept apart.
+//! goals free and reachable on the plan and in the ground truth (or, where a scenario expects
+//! them unreached, closed off in it), task maps kept apart, behaviour checks meaning what they
+//! say.
 
 // Test code: a failed unwrap is a failed test.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
@@ -9,7 +11,7 @@ use std::path::{Path, PathBuf};
 
 use map_core::{CellClass, DistanceField, OccupancyGrid, Sources};
 use sim::scenario::{json_schema, Role, Scenario};
-use sim::{SimConfig, World};
+use sim::{Command, Obstacle, SimConfig, World};
 
 fn sim_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -160,19 +162,38 @@ fn cell(grid: &OccupancyGrid, x: f64, y: f64) -> (usize, usize) {
     (usize::try_from(cx).unwrap(), usize::try_from(cy).unwrap())
 }
 
-fn check_reachable(grid: &OccupancyGrid, s: &Scenario, what: &str) {
+/// Which goals BFS reaches from the start on `grid` inflated by 0.3 m.
+fn goals_reached(grid: &OccupancyGrid, s: &Scenario) -> Vec<bool> {
     let w = grid.width_cells() as usize;
     let h = grid.height_cells() as usize;
     let blocked = DistanceField::compute(grid, Sources::OccupiedOrUnknown).inflate(0.3);
     let reached = bfs(&blocked, w, h, cell(grid, s.start.x_m, s.start.y_m));
-    for (i, g) in s.goals.iter().enumerate() {
-        let (cx, cy) = cell(grid, g.x_m, g.y_m);
+    s.goals
+        .iter()
+        .map(|g| {
+            let (cx, cy) = cell(grid, g.x_m, g.y_m);
+            reached[cy * w + cx]
+        })
+        .collect()
+}
+
+fn check_reachable(grid: &OccupancyGrid, s: &Scenario, what: &str) {
+    for (i, (g, ok)) in s.goals.iter().zip(goals_reached(grid, s)).enumerate() {
         assert!(
-            reached[cy * w + cx],
+            ok,
             "{}: goal {i} ({}, {}) unreachable on the {what}",
-            s.name,
-            g.x_m,
-            g.y_m
+            s.name, g.x_m, g.y_m
+        );
+    }
+}
+
+/// `expect_goals_reached: false` means the ground truth closes the way to every goal.
+fn check_blocked(grid: &OccupancyGrid, s: &Scenario) {
+    for (i, (g, ok)) in s.goals.iter().zip(goals_reached(grid, s)).enumerate() {
+        assert!(
+            !ok,
+            "{}: goal {i} ({}, {}) reachable on the ground truth, yet expect_goals_reached is false",
+            s.name, g.x_m, g.y_m
         );
     }
 }
@@ -199,13 +220,20 @@ fn goals_free_clear_and_reachable_on_plan_and_ground_truth() {
                 df.at(cx, cy)
             );
         }
-        assert!(s.goals.len() >= 3, "{}: needs several goals", s.name);
+        // A behaviour check is one situation on the way to one goal; tasks are goal sequences.
+        if s.role != Role::Behaviour {
+            assert!(s.goals.len() >= 3, "{}: needs several goals", s.name);
+        }
         check_reachable(plan, &s, "floor plan");
-        check_reachable(
-            &world.ground_truth_grid(),
-            &s,
-            "ground truth (furniture and glass)",
-        );
+        if s.expect_goals_reached {
+            check_reachable(
+                &world.ground_truth_grid(),
+                &s,
+                "ground truth (furniture and glass)",
+            );
+        } else {
+            check_blocked(&world.ground_truth_grid(), &s);
+        }
     }
 }
 
@@ -319,4 +347,96 @@ fn people_routes_stay_clear_of_walls_furniture_and_glass() {
             }
         }
     }
+}
+
+/// The robot agent's top speed (`robot_agent::config::Limits::default().max_speed_mps`; sim does
+/// not depend on the agent).
+const AGENT_MAX_SPEED_MPS: f64 = 0.7;
+
+/// Drives robot 0 straight ahead at the agent's top speed, blind, until it hits something or the
+/// time limit passes; returns what it hit and when.
+fn blind_run(path: &Path) -> Option<(Obstacle, f64)> {
+    let mut world = World::from_scenario_file(path, SimConfig::default()).unwrap();
+    world.add_robots_at_start(1).unwrap();
+    let dt_s = 0.05;
+    let cmd = [Command {
+        v_mps: AGENT_MAX_SPEED_MPS,
+        omega_radps: 0.0,
+    }];
+    let steps = (world.scenario.time_limit_s / dt_s) as usize;
+    for k in 0..steps {
+        let obs = world.step(&cmd, dt_s);
+        if let Some(c) = obs.robots[0].collisions.first() {
+            return Some((c.with.clone(), k as f64 * dt_s));
+        }
+    }
+    None
+}
+
+#[test]
+fn behaviour_scenarios_mean_what_they_say() {
+    let all = shipped();
+    let behaviour: BTreeMap<&str, &(PathBuf, Scenario)> = all
+        .iter()
+        .filter(|(_, s)| s.role == Role::Behaviour)
+        .map(|e| (e.1.name.as_str(), e))
+        .collect();
+    assert_eq!(
+        behaviour.keys().copied().collect::<Vec<_>>(),
+        [
+            "behaviour_glass_door",
+            "behaviour_person_ahead",
+            "behaviour_person_oncoming"
+        ]
+    );
+    // Only the glass door is there to be stopped at.
+    for (name, (_, s)) in &behaviour {
+        assert_eq!(
+            s.expect_goals_reached,
+            *name != "behaviour_glass_door",
+            "{name}"
+        );
+    }
+
+    // The glass door: a blind robot drives into the glass long before the time limit.
+    let (path, s) = behaviour["behaviour_glass_door"];
+    assert!(s.people.is_empty() && s.furniture.is_empty() && s.glass.len() >= 2);
+    let (hit, t) = blind_run(path).expect("a blind robot must hit the glass door");
+    assert!(matches!(hit, Obstacle::Glass(_)), "hit {hit:?}");
+    assert!(t < 0.5 * s.time_limit_s, "hit the door only at {t} s");
+
+    // The oncoming person: starts far ahead and walks towards the start, faster than a stroll.
+    let (path, s) = behaviour["behaviour_person_oncoming"];
+    assert_eq!(s.people.len(), 1);
+    let p = &s.people[0];
+    let (first, second) = (p.route[0], p.route[1]);
+    let start_dist = |q: sim::scenario::PointSpec| (q.x_m - s.start.x_m).hypot(q.y_m - s.start.y_m);
+    assert!(start_dist(first) > 15.0 && start_dist(second) < start_dist(first));
+    assert!(p.speed_mps >= 0.5);
+    let (hit, _) = blind_run(path).expect("a blind robot must walk into the oncoming person");
+    assert_eq!(hit, Obstacle::Person(0));
+
+    // The person ahead: walks away from the robot, slower than it, starting close.
+    let (path, s) = behaviour["behaviour_person_ahead"];
+    assert_eq!(s.people.len(), 1);
+    let p = &s.people[0];
+    let (first, second) = (p.route[0], p.route[1]);
+    let heading = (s.start.yaw_rad.cos(), s.start.yaw_rad.sin());
+    let along = |q: sim::scenario::PointSpec| {
+        (q.x_m - s.start.x_m) * heading.0 + (q.y_m - s.start.y_m) * heading.1
+    };
+    assert!(
+        along(first) > 1.0 && along(first) < 4.0,
+        "starts {} m ahead",
+        along(first)
+    );
+    assert!(along(second) > along(first) + 10.0, "walks the robot's way");
+    assert!(p.speed_mps > 0.0 && p.speed_mps < 0.5 * AGENT_MAX_SPEED_MPS);
+    let goal = s.goals[0];
+    assert!(
+        along(goal) > along(second),
+        "the goal lies beyond where the person turns off"
+    );
+    let (hit, _) = blind_run(path).expect("a blind robot must catch up with the person ahead");
+    assert_eq!(hit, Obstacle::Person(0));
 }

@@ -55,7 +55,9 @@ impl ModelKind {
             ControllerKind::Dlm => Some(Self::Dlm),
             ControllerKind::Lpe => Some(Self::Lpe),
             ControllerKind::None => Some(Self::None),
-            ControllerKind::PathTracker | ControllerKind::DynamicWindow => None,
+            ControllerKind::PathTracker
+            | ControllerKind::DynamicWindow
+            | ControllerKind::Expert => None,
         }
     }
 

@@ -1,0 +1,510 @@
+//! One closed-loop run: a scenario, a method and a seed, in lock-step in one thread.
+//!
+//! Every control cycle the simulator steps by `dt_s`; the robot agent's own [`Supervisor`] takes
+//! the odometry and the scan (AMCL on the crude floor plan), the camera frame when the method
+//! reads it, and the intention that the planning crate's [`IntentionPlanner`] answers to the
+//! pose the supervisor publishes, exactly as the fleet service answers it; the supervisor's
+//! safety rules and the method's controller give the command for the next step. Time is the
+//! simulation's: the supervisor's clock is a fixed instant plus the simulated time, so a run
+//! depends on nothing but its seed.
+//!
+//! Only the [`judge`](super::judge) (the person watching) and the privileged expert read the
+//! ground truth.
+
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::{Duration, Instant};
+
+use map_core::OccupancyGrid;
+use planning::{stop_intention, Answer, Goal, GoalProgress, IntentionPlanner, PlanningMap};
+use protocol::{normalize_angle, ControllerKind, Intention, MapName, MapRef, Pose2D, TaskId};
+use robot_agent::controllers::Controller;
+use robot_agent::{make_controller, AgentConfig, Supervisor};
+use serde::{Deserialize, Serialize};
+use sim::scenario::Role;
+use sim::{Command, Scenario, SimConfig, World};
+
+use super::judge::{self, Collisions, GoalDistance};
+use super::{TableError, TableOptions};
+use crate::expert::{Expert, SharedTruth, TruthView};
+use crate::metrics::{self, TrajectorySample};
+
+/// The true position must get this much closer to the goal (along the floor plan) within
+/// `stuck_timeout_s` to count as progress.
+pub const PROGRESS_M: f64 = 0.5;
+
+/// A scenario loaded once and shared by all its runs.
+#[derive(Debug)]
+pub struct Prepared {
+    pub path: PathBuf,
+    pub scenario: Scenario,
+    pub plan: OccupancyGrid,
+    pub planning: Arc<PlanningMap>,
+    /// Geodesic distance to each goal, for the judge.
+    pub goal_distance: Vec<GoalDistance>,
+}
+
+impl Prepared {
+    /// Loads a scenario file and its floor plan and builds what every run of it shares.
+    ///
+    /// # Errors
+    /// [`TableError::Scenario`] naming the file for an unreadable or invalid scenario or plan.
+    pub fn load(path: &Path, options: &TableOptions) -> Result<Self, TableError> {
+        let scenario_err = |p: &Path, e: String| TableError::Scenario {
+            path: p.display().to_string(),
+            reason: e,
+        };
+        let scenario = Scenario::load(path).map_err(|e| scenario_err(path, e.to_string()))?;
+        let plan_path = scenario.floor_plan_path(path);
+        let plan = map_core::load_ros_map(&plan_path, &map_core::ImportLimits::default())
+            .map_err(|e| scenario_err(&plan_path, e.to_string()))?
+            .grid;
+        let planning = Arc::new(
+            PlanningMap::new(plan.clone(), &options.intention.planner)
+                .map_err(|e| scenario_err(&plan_path, e.to_string()))?,
+        );
+        let goal_distance = scenario
+            .goals
+            .iter()
+            .map(|g| GoalDistance::new(&plan, g.x_m, g.y_m))
+            .collect();
+        Ok(Self {
+            path: path.to_path_buf(),
+            scenario,
+            plan,
+            planning,
+            goal_distance,
+        })
+    }
+
+    /// Whether the scenario checks a behaviour (no interventions; judged by its expectation).
+    #[must_use]
+    pub fn is_behaviour(&self) -> bool {
+        self.scenario.role == Role::Behaviour
+    }
+}
+
+/// What one run measured (one object of `runs.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunResult {
+    pub scenario: String,
+    /// `training`, `evaluation` or `behaviour`.
+    pub role: String,
+    pub method: ControllerKind,
+    pub seed: u64,
+    /// Evaluation and training: every goal reached within the time limit and at most the
+    /// intervention limit. Behaviour: no collision, and the goals reached exactly when the
+    /// scenario expects them to be.
+    pub success: bool,
+    /// Why a run failed (`None` on success).
+    pub failure: Option<String>,
+    pub interventions: u32,
+    /// When, where and why the human intervened.
+    pub intervention_log: Vec<InterventionEvent>,
+    /// Contacts by what was touched (a contact counts once however long it lasts).
+    pub collisions: Collisions,
+    /// Simulated seconds until the last goal was reached (or the run ended).
+    pub time_s: f64,
+    /// Mean |jerk| of the true trajectory in m/s³ (see `docs/evaluation.md`); `None` for a run
+    /// too short to have one.
+    pub smoothness: Option<f64>,
+    /// Length of the true trajectory (interventions' carries excluded).
+    pub path_length_m: f64,
+    /// Smallest gap between the robot's disc and a person's (0: contact); `None` without people.
+    pub min_person_distance_m: Option<f64>,
+    /// Smallest gap between the robot's disc and a glass pane; `None` without glass.
+    pub min_glass_distance_m: Option<f64>,
+    pub goals_reached: usize,
+    pub goals_total: usize,
+    /// Mean distance between the pose the agent published (AMCL carried forward by odometry,
+    /// every cycle) and the truth.
+    pub mean_position_error_m: f64,
+    pub max_position_error_m: f64,
+    pub mean_heading_error_deg: f64,
+    pub max_heading_error_deg: f64,
+    /// Wall-clock seconds the run took (not deterministic; everything else is).
+    pub wall_s: f64,
+}
+
+/// One human intervention.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InterventionEvent {
+    pub t_s: f64,
+    /// Where the robot was picked up (true position).
+    pub x_m: f64,
+    pub y_m: f64,
+    /// `collision: <what>` or `no progress`.
+    pub cause: String,
+}
+
+/// The picture material of a run (kept in memory for the figures, not in `runs.json`).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RunTrace {
+    /// True positions, one per cycle.
+    pub points_m: Vec<(f64, f64)>,
+    /// The planner's first path of every leg.
+    pub planned_m: Vec<(f64, f64)>,
+    /// Where interventions picked the robot up.
+    pub interventions_m: Vec<(f64, f64)>,
+    pub collisions_m: Vec<(f64, f64)>,
+}
+
+fn setup(what: &'static str) -> impl FnOnce(String) -> TableError {
+    move |reason| TableError::Setup { what, reason }
+}
+
+/// The agent configuration of a method: the base one with this controller and, for the
+/// networks, the model `<models_dir>/<method>.onnx`.
+fn agent_config(
+    options: &TableOptions,
+    method: ControllerKind,
+    start: Pose2D,
+    seed: u64,
+) -> AgentConfig {
+    let mut agent = options.agent.clone();
+    agent.controller = method;
+    if method.needs_model() {
+        agent.model = Some(options.model_path(method));
+        // Runs go in parallel on all cores already.
+        agent.intention_net.intra_threads = 1;
+    }
+    agent.amcl.seed ^= seed;
+    // The operator places the robot where the scenario says and tells the agent so.
+    agent.localization.initial_pose = Some(start);
+    agent
+}
+
+/// Runs `method` on a prepared scenario with `seed` (mixed into the world's and AMCL's seeds;
+/// 0 keeps the scenario's own). `progress` gets the simulated seconds of every cycle.
+///
+/// # Errors
+/// [`TableError`] when the world, the controller (e.g. a missing model) or the pipeline
+/// cannot be set up; what happens during the run is measured, not an error.
+#[allow(clippy::too_many_lines)]
+pub fn run_one(
+    prepared: &Prepared,
+    method: ControllerKind,
+    seed: u64,
+    options: &TableOptions,
+    mut progress: impl FnMut(f64),
+) -> Result<(RunResult, RunTrace), TableError> {
+    let started = Instant::now();
+    let mut scenario = prepared.scenario.clone();
+    scenario.seed ^= seed;
+    let name = scenario.name.clone();
+    let role = serde_json::to_value(scenario.role)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_owned))
+        .unwrap_or_default();
+    let behaviour = prepared.is_behaviour();
+    let expect_goals = scenario.expect_goals_reached;
+    let time_limit_s = options.time_limit_s.unwrap_or(scenario.time_limit_s);
+    let goals: Vec<Goal> = scenario
+        .goals
+        .iter()
+        .map(|g| Goal::at(g.x_m, g.y_m))
+        .collect();
+    let goals_total = goals.len();
+    let mut world = World::new(scenario, prepared.plan.clone(), SimConfig::default())
+        .map_err(|e| setup("world")(e.to_string()))?;
+    world
+        .add_robots_at_start(1)
+        .map_err(|e| setup("robot")(e.to_string()))?;
+    let start = world
+        .ground_truth_pose(0)
+        .ok_or_else(|| setup("robot")("no robot".into()))?;
+
+    let agent = agent_config(options, method, start, seed);
+    let truth: SharedTruth = Arc::new(Mutex::new(TruthView::of(&world, 0)));
+    let controller: Box<dyn Controller> = if method == ControllerKind::Expert {
+        Box::new(
+            Expert::new(&world, options.expert, Arc::clone(&truth))
+                .map_err(|e| setup("expert")(e.to_string()))?,
+        )
+    } else {
+        make_controller(&agent).map_err(|e| TableError::Controller {
+            method,
+            reason: e.to_string(),
+        })?
+    };
+    let map = MapRef {
+        name: MapName::new("plan").map_err(|e| setup("map name")(e.to_string()))?,
+        version: 1,
+    };
+    let initial_covariance = agent.localization.initial_covariance();
+    let mut supervisor = Supervisor::new(agent, map, &prepared.plan, controller)
+        .map_err(|e| setup("agent")(e.to_string()))?;
+    let mut pipeline =
+        IntentionPlanner::new(Arc::clone(&prepared.planning), options.intention.clone())
+            .map_err(|e| setup("intention pipeline")(e.to_string()))?;
+    let task_id = TaskId::new(name.clone()).ok();
+
+    let dt_s = options.dt_s;
+    // The supervisor's clock: a fixed origin plus simulated time.
+    let epoch = Instant::now();
+    let mut cmd = Command::default();
+    let mut trace = RunTrace::default();
+    let mut samples: Vec<Vec<TrajectorySample>> = vec![Vec::new()];
+    let mut collisions = Collisions::default();
+    let mut intervention_log = Vec::new();
+    let mut in_contact = false;
+    let (mut goal_index, mut interventions) = (0usize, 0u32);
+    let mut last_path: Vec<Pose2D> = Vec::new();
+    let mut planned_leg: Option<usize> = None;
+    let mut min_person: Option<f64> = None;
+    let mut min_glass: Option<f64> = None;
+    let (mut sum_err, mut max_err, mut cycles) = (0.0f64, 0.0f64, 0u64);
+    let (mut sum_yaw_err, mut max_yaw_err) = (0.0f64, 0.0f64);
+    let mut path_length_m = 0.0;
+    let mut last_truth = start;
+    // The judge's progress: the best remaining distance to the current goal and when.
+    let mut best_remaining = prepared.goal_distance[0].at(start.x_m, start.y_m);
+    let mut progress_s = 0.0;
+    let mut t_s = 0.0;
+    let mut failure: Option<String> = None;
+    let mut finished_s: Option<f64> = None;
+
+    while t_s < time_limit_s {
+        let obs = world.step(&[cmd], dt_s);
+        t_s += dt_s;
+        let now = epoch + Duration::from_nanos(obs.time_ns);
+        let o = &obs.robots[0];
+        let truth_pose = o.ground_truth_pose;
+        path_length_m += truth_pose.distance_m(&last_truth);
+        last_truth = truth_pose;
+        trace.points_m.push((truth_pose.x_m, truth_pose.y_m));
+        if let Some(last) = samples.last_mut() {
+            last.push(TrajectorySample {
+                t_s,
+                x_m: truth_pose.x_m,
+                y_m: truth_pose.y_m,
+            });
+        }
+        // A contact counts once, however many steps the robot keeps pushing (only behaviour
+        // runs, which have no interventions, go on pushing).
+        if let Some(c) = o.collisions.first() {
+            if !in_contact {
+                collisions.count(&c.with);
+                trace
+                    .collisions_m
+                    .push((c.stopped_at.x_m, c.stopped_at.y_m));
+            }
+        }
+        in_contact = !o.collisions.is_empty();
+        if let Some(g) = judge::person_gap_m(&world, 0) {
+            min_person = Some(min_person.map_or(g, |m: f64| m.min(g)));
+        }
+        if let Some(g) = judge::glass_gap_m(&world, 0) {
+            min_glass = Some(min_glass.map_or(g, |m: f64| m.min(g)));
+        }
+        progress(t_s);
+
+        // The agent: odometry, then AMCL on the scan; the pose it publishes.
+        supervisor.on_odometry(o.odom.clone());
+        let estimate = supervisor
+            .on_scan(o.scan.clone(), now, obs.time_ns)
+            .map_err(|e| setup("agent scan")(e.to_string()))?;
+        if let Some(e) = &estimate {
+            let err = e.pose.distance_m(&truth_pose);
+            let yaw_err = normalize_angle(e.pose.yaw_rad - truth_pose.yaw_rad)
+                .abs()
+                .to_degrees();
+            sum_err += err;
+            max_err = max_err.max(err);
+            sum_yaw_err += yaw_err;
+            max_yaw_err = max_yaw_err.max(yaw_err);
+            cycles += 1;
+        }
+
+        // The person watching.
+        let remaining = prepared.goal_distance[goal_index.min(goals_total - 1)]
+            .at(truth_pose.x_m, truth_pose.y_m);
+        if remaining <= best_remaining - PROGRESS_M {
+            (best_remaining, progress_s) = (remaining, t_s);
+        }
+        let collided = o.collisions.first().map(|c| c.with.clone());
+        if !behaviour && (collided.is_some() || t_s - progress_s > options.stuck_timeout_s) {
+            if interventions >= options.max_interventions {
+                failure = Some(format!(
+                    "more than {} interventions",
+                    options.max_interventions
+                ));
+                break;
+            }
+            if let Some(put) = judge::put_down_pose(
+                &world,
+                0,
+                &last_path,
+                truth_pose,
+                options.intervention_ahead_m,
+            ) {
+                world
+                    .carry_robot(0, put)
+                    .map_err(|e| setup("intervention")(e.to_string()))?;
+                supervisor
+                    .set_pose(put, initial_covariance)
+                    .map_err(|e| setup("intervention")(e.to_string()))?;
+                pipeline.clear_trail();
+                interventions += 1;
+                trace.interventions_m.push((truth_pose.x_m, truth_pose.y_m));
+                intervention_log.push(InterventionEvent {
+                    t_s,
+                    x_m: truth_pose.x_m,
+                    y_m: truth_pose.y_m,
+                    cause: collided.as_ref().map_or_else(
+                        || "no progress".to_string(),
+                        |w| format!("collision: {}", judge::obstacle_kind(w)),
+                    ),
+                });
+                tracing::debug!(scenario = %name, %method, seed, t_s, ?truth_pose, ?put, ?collided, "intervention");
+                last_truth = put;
+                in_contact = false;
+                samples.push(Vec::new());
+                best_remaining =
+                    prepared.goal_distance[goal_index.min(goals_total - 1)].at(put.x_m, put.y_m);
+                progress_s = t_s;
+                cmd = Command::default();
+                continue;
+            }
+            tracing::debug!(scenario = %name, %method, seed, t_s, "no free spot ahead on the path");
+        }
+
+        // The planner service's answer to the published pose.
+        if let Some(estimate) = estimate {
+            let header = estimate.header;
+            let intention: Intention = match pipeline.answer(
+                &estimate,
+                &GoalProgress::new(&goals, goal_index),
+                method.reads_lpe(),
+            ) {
+                Answer::Done => {
+                    goal_index = goals_total;
+                    finished_s = Some(t_s);
+                    break;
+                }
+                Answer::Heading {
+                    goal_index: k,
+                    plan,
+                } => {
+                    if k > goal_index {
+                        goal_index = k;
+                        best_remaining =
+                            prepared.goal_distance[k].at(truth_pose.x_m, truth_pose.y_m);
+                        progress_s = t_s;
+                    }
+                    match plan {
+                        Ok(p) => {
+                            last_path.clone_from(&p.path);
+                            if planned_leg != Some(k) {
+                                planned_leg = Some(k);
+                                trace
+                                    .planned_m
+                                    .extend(p.path.iter().map(|q| (q.x_m, q.y_m)));
+                            }
+                            p.intention(header, &estimate, task_id.clone(), k, method.reads_lpe())
+                        }
+                        Err(e) => {
+                            tracing::debug!(scenario = %name, %method, seed, "replan failed: {e}");
+                            stop_intention(header, &estimate, task_id.clone(), k)
+                        }
+                    }
+                }
+            };
+            if let Err(reason) = supervisor.on_intention(intention) {
+                tracing::warn!(scenario = %name, "intention refused: {reason}");
+            }
+        }
+        if method.reads_camera() {
+            let frame = world
+                .camera_frame(0)
+                .map_err(|e| setup("camera")(e.to_string()))?;
+            supervisor.on_camera(frame);
+        }
+        if method == ControllerKind::Expert {
+            *truth.lock().unwrap_or_else(PoisonError::into_inner) = TruthView::of(&world, 0);
+        }
+        let decision = supervisor.control(now);
+        tracing::trace!(
+            scenario = %name, %method, seed, t_s,
+            x = truth_pose.x_m, y = truth_pose.y_m, yaw = truth_pose.yaw_rad,
+            v = decision.cmd_v_mps, w = decision.cmd_omega_radps,
+            state = ?decision.state, goal_index, remaining,
+            "cycle"
+        );
+        cmd = Command {
+            v_mps: decision.cmd_v_mps,
+            omega_radps: decision.cmd_omega_radps,
+        };
+    }
+
+    let goals_reached = goal_index.min(goals_total);
+    let no_contact = collisions.total() == 0;
+    let success = if behaviour {
+        let reached_all = goals_reached == goals_total;
+        let ok = no_contact && reached_all == expect_goals;
+        if !ok {
+            failure = Some(if !no_contact {
+                format!("{} collision(s)", collisions.total())
+            } else if expect_goals {
+                "goal not reached".to_string()
+            } else {
+                "reached a goal it should not".to_string()
+            });
+        }
+        ok
+    } else {
+        if failure.is_none() && goals_reached < goals_total {
+            failure = Some(format!("time limit {time_limit_s} s"));
+        }
+        failure.is_none()
+    };
+    let jerk = segments_jerk(&samples);
+    #[allow(clippy::cast_precision_loss)]
+    let n = cycles.max(1) as f64;
+    Ok((
+        RunResult {
+            scenario: name,
+            role,
+            method,
+            seed,
+            success,
+            failure,
+            interventions,
+            intervention_log,
+            collisions,
+            time_s: finished_s.unwrap_or(t_s),
+            smoothness: jerk,
+            path_length_m,
+            min_person_distance_m: min_person,
+            min_glass_distance_m: min_glass,
+            goals_reached,
+            goals_total,
+            mean_position_error_m: sum_err / n,
+            max_position_error_m: max_err,
+            mean_heading_error_deg: sum_yaw_err / n,
+            max_heading_error_deg: max_yaw_err,
+            wall_s: started.elapsed().as_secs_f64(),
+        },
+        trace,
+    ))
+}
+
+/// Mean |jerk| over the trajectory's pieces between interventions, weighted by their lengths
+/// (a carry is not motion).
+fn segments_jerk(segments: &[Vec<TrajectorySample>]) -> Option<f64> {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for s in segments.iter().filter(|s| s.len() >= 4) {
+        if let Ok(j) = metrics::mean_abs_jerk_mps3(s) {
+            let k = s.len() - 3;
+            #[allow(clippy::cast_precision_loss)]
+            {
+                sum += j * k as f64;
+            }
+            n += k;
+        }
+    }
+    #[allow(clippy::cast_precision_loss)]
+    (n > 0).then(|| sum / n as f64)
+}

@@ -1,0 +1,191 @@
+//! The `eval table` smoke test CI runs: one task × two methods × one seed through the real
+//! binary, checking what it writes.
+
+#![allow(clippy::unwrap_used)]
+use std::path::Path;
+use std::process::Command;
+
+fn read_json(path: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+#[test]
+fn one_task_two_methods_writes_runs_table_and_figures() {
+    let out = tempfile::tempdir().unwrap();
+    let status = Command::new(env!("CARGO_BIN_EXE_eval"))
+        .args([
+            "table",
+            "--tasks",
+            "a",
+            "--methods",
+            "dynamic-window,expert",
+        ])
+        .args(["--seeds", "1", "--jobs", "2", "--out"])
+        .arg(out.path())
+        .arg("--scenarios")
+        .arg(test_support::scenarios_dir())
+        .status()
+        .unwrap();
+    assert!(status.success(), "eval table failed: {status}");
+
+    let runs = read_json(&out.path().join("runs.json"));
+    let runs = runs.as_array().expect("runs.json is a list");
+    assert_eq!(runs.len(), 2);
+    for run in runs {
+        for key in [
+            "scenario",
+            "method",
+            "seed",
+            "success",
+            "interventions",
+            "collisions",
+            "time_s",
+            "smoothness",
+            "goals_reached",
+            "goals_total",
+            "min_person_distance_m",
+        ] {
+            assert!(run.get(key).is_some(), "run lacks {key}: {run}");
+        }
+        assert_eq!(run["scenario"], "task_a");
+        assert_eq!(run["seed"], 0);
+        assert_eq!(run["goals_total"], 4);
+        // Task A has a person walking the main corridor.
+        assert!(run["min_person_distance_m"].as_f64().is_some(), "{run}");
+        let smoothness = run["smoothness"].as_f64().expect("a smoothness");
+        assert!(smoothness > 0.0 && smoothness.is_finite(), "{run}");
+    }
+    let expert = runs.iter().find(|r| r["method"] == "expert").unwrap();
+    // The teacher gets there without help and without touching anything.
+    assert_eq!(expert["success"], true, "{expert}");
+    assert_eq!(expert["interventions"], 0, "{expert}");
+    assert_eq!(expert["goals_reached"], 4, "{expert}");
+    let c = &expert["collisions"];
+    for kind in ["wall", "furniture", "glass", "person", "robot"] {
+        assert_eq!(c[kind], 0, "expert collided with a {kind}: {expert}");
+    }
+    let time_s = expert["time_s"].as_f64().unwrap();
+    assert!(time_s > 60.0 && time_s < 480.0, "{expert}");
+
+    let table = read_json(&out.path().join("table.json"));
+    let rows = table["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 2);
+    assert!(rows
+        .iter()
+        .all(|r| r["runs"] == 1 && r["scenario"] == "task_a"));
+    assert!(table["wall_s"].as_f64().unwrap() > 0.0);
+    assert!(table["simulated_s"].as_f64().unwrap() > 60.0);
+
+    let md = std::fs::read_to_string(out.path().join("table.md")).unwrap();
+    assert!(md.contains("| task_a | expert | 1/1 |"), "{md}");
+    assert!(md.contains("| task_a | dynamic-window |"), "{md}");
+    assert!(md.contains("real-time factor"), "{md}");
+
+    for picture in ["figures/task_a.png", "figures/grid.png"] {
+        let img = image::open(out.path().join(picture))
+            .unwrap_or_else(|e| panic!("{picture}: {e}"))
+            .to_rgb8();
+        assert!(img.width() > 100 && img.height() > 100, "{picture}");
+    }
+}
+
+#[test]
+fn a_missing_model_is_an_error_naming_the_file() {
+    let out = tempfile::tempdir().unwrap();
+    let models = tempfile::tempdir().unwrap();
+    let output = Command::new(env!("CARGO_BIN_EXE_eval"))
+        .args(["table", "--tasks", "a", "--methods", "dlm", "--seeds", "1"])
+        .arg("--models")
+        .arg(models.path())
+        .arg("--out")
+        .arg(out.path())
+        .arg("--scenarios")
+        .arg(test_support::scenarios_dir())
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    let err = String::from_utf8_lossy(&output.stderr);
+    let expected = models.path().join("dlm.onnx");
+    assert!(
+        err.contains(&expected.display().to_string()),
+        "error should name {}: {err}",
+        expected.display()
+    );
+    assert!(!out.path().join("runs.json").exists());
+}
+
+#[test]
+fn bad_arguments_are_refused_by_name() {
+    let out = tempfile::tempdir().unwrap();
+    for (args, needle) in [
+        (vec!["--tasks", "z"], "tasks"),
+        (vec!["--seeds", "0"], "--seeds"),
+        (vec!["--methods", "teleport"], "teleport"),
+    ] {
+        let output = Command::new(env!("CARGO_BIN_EXE_eval"))
+            .arg("table")
+            .args(&args)
+            .arg("--out")
+            .arg(out.path())
+            .arg("--scenarios")
+            .arg(test_support::scenarios_dir())
+            .output()
+            .unwrap();
+        assert!(!output.status.success(), "{args:?}");
+        let err = String::from_utf8_lossy(&output.stderr);
+        assert!(err.contains(needle), "{args:?}: {err}");
+    }
+}
+
+fn prepared(name: &str) -> (eval::table::Prepared, eval::table::TableOptions) {
+    let options = eval::table::TableOptions::default();
+    let path = test_support::scenarios_dir().join(format!("{name}.yaml"));
+    (
+        eval::table::Prepared::load(&path, &options).unwrap(),
+        options,
+    )
+}
+
+#[test]
+fn a_run_depends_on_its_seed_only() {
+    use protocol::ControllerKind;
+    let (p, options) = prepared("behaviour_person_oncoming");
+    let run = |seed| {
+        let (mut r, trace) =
+            eval::table::run_one(&p, ControllerKind::DynamicWindow, seed, &options, |_| {})
+                .unwrap();
+        r.wall_s = 0.0;
+        (r, trace)
+    };
+    let (a, ta) = run(3);
+    let (b, tb) = run(3);
+    assert_eq!(a, b);
+    assert_eq!(ta, tb);
+    let (c, _) = run(4);
+    assert_ne!(a.mean_position_error_m, c.mean_position_error_m);
+}
+
+#[test]
+fn the_glass_door_is_judged_by_contact_and_by_not_reaching_the_goal() {
+    use protocol::ControllerKind;
+    let (p, options) = prepared("behaviour_glass_door");
+    assert!(p.is_behaviour());
+    // The dynamic window's laser sees through glass: it drives into the door.
+    let (dw, _) =
+        eval::table::run_one(&p, ControllerKind::DynamicWindow, 0, &options, |_| {}).unwrap();
+    assert!(!dw.success, "{dw:?}");
+    assert!(dw.collisions.glass >= 1, "{dw:?}");
+    // Behaviour runs have no interventions, and a contact counts once however long it lasts.
+    assert_eq!(dw.interventions, 0);
+    assert_eq!(dw.collisions.total(), 1, "{dw:?}");
+    assert_eq!(dw.goals_reached, 0);
+    // The expert knows the glass is there: it stops short and waits, which is right.
+    let (expert, _) =
+        eval::table::run_one(&p, ControllerKind::Expert, 0, &options, |_| {}).unwrap();
+    assert!(expert.success, "{expert:?}");
+    assert_eq!(expert.collisions.total(), 0, "{expert:?}");
+    assert_eq!(expert.goals_reached, 0);
+    let gap = expert.min_glass_distance_m.unwrap();
+    assert!(gap > 0.05 && gap < 1.5, "{expert:?}");
+}
