@@ -1283,7 +1283,7 @@ impl Expert {
         for stop_m in [stop_at_m, hold_m].into_iter().flatten() {
             v = v.min((2.0 * brake * (stop_m - 0.2).max(0.0)).sqrt());
         }
-        // Whoever is ahead in the robot's lane.
+        // Follow whoever walks ahead in the robot's lane.
         let (sh, ch) = pose.yaw_rad.sin_cos();
         for m in &self.movers {
             let d = m.disc;
@@ -1294,15 +1294,10 @@ impl Expert {
             }
             let gap = px.hypot(py) - radii;
             let along = d.vx_mps * ch + d.vy_mps * sh;
+            let cap = along.max(0.0) + 0.5 * (gap - c.follow_gap_m);
             let stoppable =
                 along.max(0.0) + (2.0 * brake * (gap - c.people_margin_m).max(0.0)).sqrt();
-            v = v.min(stoppable);
-            // Keep a gap behind whoever walks the same way; someone coming the other way is
-            // given way to instead (stopping in their way would only block them).
-            if along >= -ONCOMING_MPS {
-                let cap = along.max(0.0) + 0.5 * (gap - c.follow_gap_m);
-                v = v.min(cap.max(0.0));
-            }
+            v = v.min(cap.max(0.0)).min(stoppable);
         }
         let v = v.max(0.0);
         (
@@ -1898,12 +1893,6 @@ impl Controller for Expert {
             soft
         };
         let control = self.drive(limits, &f, target, dt);
-        let gap_m = self
-            .view
-            .people
-            .iter()
-            .map(|d| (d.x_m - pose.x_m).hypot(d.y_m - pose.y_m) - d.radius_m - self.radius_m)
-            .fold(f64::INFINITY, f64::min);
         tracing::trace!(
             t_s = self.clock_s,
             x = pose.x_m,
@@ -1917,7 +1906,13 @@ impl Controller for Expert {
             detour = self.detour.is_some(),
             v = self.motion.v_mps,
             w = self.motion.omega_radps,
-            gap_m,
+            // Evaluated only when tracing is on.
+            person_gap_m = self
+                .view
+                .people
+                .iter()
+                .map(|d| (d.x_m - pose.x_m).hypot(d.y_m - pose.y_m) - d.radius_m - self.radius_m)
+                .fold(f64::INFINITY, f64::min),
             "expert"
         );
         Ok(control)
