@@ -64,6 +64,7 @@
 use std::collections::BinaryHeap;
 use std::sync::{Arc, Mutex, PoisonError};
 
+use map_core::search::MinCost;
 use map_core::{DistanceField, GridGeometry, Sources};
 use protocol::{normalize_angle, Dlm, Pose2D};
 use robot_agent::controllers::path_tracker::{pursuit_curvature, to_robot_frame};
@@ -397,24 +398,6 @@ impl StaticTruth {
     }
 }
 
-/// Open-list entry of the detour search, ordered so that the max-heap pops the lowest f.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Open(f32, u32);
-
-impl Eq for Open {}
-
-impl PartialOrd for Open {
-    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
-        Some(self.cmp(other))
-    }
-}
-
-impl Ord for Open {
-    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
-        other.0.total_cmp(&self.0).then(other.1.cmp(&self.1))
-    }
-}
-
 /// Most cells one detour search may expand (a bound on its cost, about 10 ms).
 const MAX_EXPANSIONS: u32 = 120_000;
 /// How far the detour's goal may be moved off the planner's path to a cell with clearance.
@@ -434,7 +417,7 @@ struct Search {
     closed: Vec<u32>,
     g: Vec<f32>,
     parent: Vec<u32>,
-    open: BinaryHeap<Open>,
+    open: BinaryHeap<MinCost<f32, u32>>,
 }
 
 impl Search {
@@ -509,10 +492,10 @@ impl Search {
         self.g[si] = 0.0;
         self.seen[si] = gen;
         #[allow(clippy::cast_possible_truncation)]
-        self.open.push(Open(octile(sx, sy), si as u32));
+        self.open.push(MinCost(octile(sx, sy), si as u32));
         let mut expanded = 0u32;
         let wu = usize::try_from(w).ok()?;
-        while let Some(Open(_, i)) = self.open.pop() {
+        while let Some(MinCost(_, i)) = self.open.pop() {
             let i = i as usize;
             if self.closed[i] == gen {
                 continue;
@@ -568,7 +551,7 @@ impl Search {
                     #[allow(clippy::cast_possible_truncation)]
                     {
                         self.parent[j] = i as u32;
-                        self.open.push(Open(ng + octile(nx, ny), j as u32));
+                        self.open.push(MinCost(ng + octile(nx, ny), j as u32));
                     }
                 }
             }
@@ -673,22 +656,6 @@ impl FilterLimits {
             omega_radps: wc,
             turn_accel_radps2: if wc == w { al } else { 0.0 },
         }
-    }
-}
-
-/// Integrates a unicycle exactly over `dt` (an arc when turning), as the simulator does.
-fn integrate(p: Pose2D, v: f64, w: f64, dt: f64) -> Pose2D {
-    let yaw = p.yaw_rad;
-    if w.abs() < 1e-9 {
-        Pose2D::new(p.x_m + v * dt * yaw.cos(), p.y_m + v * dt * yaw.sin(), yaw)
-    } else {
-        let yaw2 = yaw + w * dt;
-        let r = v / w;
-        Pose2D::new(
-            p.x_m + r * (yaw2.sin() - yaw.sin()),
-            p.y_m - r * (yaw2.cos() - yaw.cos()),
-            yaw2,
-        )
     }
 }
 
@@ -1561,7 +1528,7 @@ impl Expert {
         let mut p = pose;
         for k in 1..=steps {
             m = f.step(m, target.0, target.1, dt);
-            p = integrate(p, m.v_mps, m.omega_radps, dt);
+            p = sim::integrate(p, m.v_mps, m.omega_radps, dt);
             #[allow(clippy::cast_precision_loss)]
             let t = k as f64 * dt;
             let clear = self
@@ -1644,7 +1611,7 @@ impl Expert {
             } else {
                 w.signum() * (w.abs() - limits.max_turn_accel_radps2 * dt).max(0.0)
             };
-            p = integrate(p, v, w, dt);
+            p = sim::integrate(p, v, w, dt);
             t += dt;
             let clear = self
                 .statics

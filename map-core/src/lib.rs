@@ -20,6 +20,7 @@ pub mod fetch;
 pub mod grid;
 pub mod picture;
 pub mod ros;
+pub mod search;
 
 pub use distance::{DistanceField, Sources};
 pub use error::MapError;

@@ -24,4 +24,6 @@ pub mod world;
 pub use config::SimConfig;
 pub use roster::{Roster, RosterError, RosterRobot};
 pub use scenario::{Scenario, ScenarioError};
-pub use world::{Collision, Command, Observations, Obstacle, RobotObservation, SimError, World};
+pub use world::{
+    integrate, Collision, Command, Observations, Obstacle, RobotObservation, SimError, World,
+};

@@ -228,8 +228,10 @@ pub struct World {
     time_ns: u64,
 }
 
-/// Integrates a unicycle exactly over `dt` (arc when turning).
-fn integrate(p: Pose2D, v: f64, w: f64, dt: f64) -> Pose2D {
+/// Integrates a unicycle exactly over `dt` (arc when turning): the simulator's motion model,
+/// also what a privileged controller predicts with.
+#[must_use]
+pub fn integrate(p: Pose2D, v: f64, w: f64, dt: f64) -> Pose2D {
     let yaw = p.yaw_rad;
     if w.abs() < 1e-9 {
         Pose2D::new(p.x_m + v * dt * yaw.cos(), p.y_m + v * dt * yaw.sin(), yaw)

@@ -3,9 +3,9 @@
 //! progress towards its goal for a while) and where to put it down, and it keeps the figures
 //! of a run (collisions by obstacle kind, distances to people and glass).
 
-use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
+use map_core::search::MinCost;
 use map_core::{classify, CellClass, OccupancyGrid};
 use protocol::Pose2D;
 use sim::{Obstacle, World};
@@ -27,23 +27,6 @@ pub struct GoalDistance {
     goal: (f64, f64),
 }
 
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Entry(f32, u32);
-
-impl Eq for Entry {}
-
-impl PartialOrd for Entry {
-    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
-        Some(self.cmp(other))
-    }
-}
-
-impl Ord for Entry {
-    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
-        self.0.total_cmp(&other.0).then(self.1.cmp(&other.1))
-    }
-}
-
 impl GoalDistance {
     /// Distances from every free plan cell to the goal at (`x_m`, `y_m`).
     #[must_use]
@@ -60,11 +43,11 @@ impl GoalDistance {
         if let Some(i) = plan.geometry().checked_index(gx, gy) {
             distance_m[i] = 0.0;
             #[allow(clippy::cast_possible_truncation)]
-            heap.push(Reverse(Entry(0.0, i as u32)));
+            heap.push(MinCost(0.0f32, i as u32));
         }
         #[allow(clippy::cast_possible_truncation)]
         let (step, diag) = (res as f32, (res * std::f64::consts::SQRT_2) as f32);
-        while let Some(Reverse(Entry(d, i))) = heap.pop() {
+        while let Some(MinCost(d, i)) = heap.pop() {
             if d > distance_m[i as usize] {
                 continue;
             }
@@ -94,7 +77,7 @@ impl GoalDistance {
                 if nd < distance_m[j] {
                     distance_m[j] = nd;
                     #[allow(clippy::cast_possible_truncation)]
-                    heap.push(Reverse(Entry(nd, j as u32)));
+                    heap.push(MinCost(nd, j as u32));
                 }
             }
         }

@@ -21,6 +21,7 @@
 //! (after Brock & Khatib's global dynamic window, 1999) then supplies a detour point to head
 //! for, with hysteresis so that the robot keeps to the side it chose.
 
+use map_core::search::MinCost;
 use protocol::normalize_angle;
 
 /// The 8-connected neighbourhood of a grid cell, as (dx, dy) offsets.
@@ -287,25 +288,7 @@ struct NavGrid {
     half_m: f64,
     blocked: Vec<bool>,
     value: Vec<f64>,
-    heap: std::collections::BinaryHeap<HeapItem>,
-}
-
-/// Dijkstra queue entry, ordered so that the max-heap pops the smallest value.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct HeapItem(f64, usize);
-
-impl Eq for HeapItem {}
-
-impl PartialOrd for HeapItem {
-    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
-        Some(self.cmp(other))
-    }
-}
-
-impl Ord for HeapItem {
-    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
-        other.0.total_cmp(&self.0).then(other.1.cmp(&self.1))
-    }
+    heap: std::collections::BinaryHeap<MinCost<f64, usize>>,
 }
 
 impl NavGrid {
@@ -373,7 +356,7 @@ impl NavGrid {
         if let Some(i) = self.cell(x, y) {
             if !self.blocked[i] && value < self.value[i] {
                 self.value[i] = value;
-                self.heap.push(HeapItem(value, i));
+                self.heap.push(MinCost(value, i));
             }
         }
     }
@@ -382,7 +365,7 @@ impl NavGrid {
     fn propagate(&mut self) {
         let n = self.n as isize;
         let diag = self.res_m * std::f64::consts::SQRT_2;
-        while let Some(HeapItem(v, i)) = self.heap.pop() {
+        while let Some(MinCost(v, i)) = self.heap.pop() {
             if v > self.value[i] {
                 continue;
             }
@@ -399,7 +382,7 @@ impl NavGrid {
                 let nv = v + if dx != 0 && dy != 0 { diag } else { self.res_m };
                 if nv < self.value[j] {
                     self.value[j] = nv;
-                    self.heap.push(HeapItem(nv, j));
+                    self.heap.push(MinCost(nv, j));
                 }
             }
         }
