@@ -7,6 +7,10 @@
 //! `eval table [--tasks a,b,c,d,e] [--scenario FILE]... [--behaviour] [--methods LIST]
 //! [--seeds N] [--models DIR] [--jobs N] --out DIR`: the paper's Table 1 and Figure 5 in
 //! closed loop (see [`crate::table`]).
+//!
+//! `eval record [--scenario FILE]... [--samples N] [--noise P] [--noise-peak-radps W]
+//! [--seed S] [--jobs N] [--image-px PX] [--every K] [--episode-s S] --out DIR`: the expert's demonstrations on the
+//! training scenarios as an imitation-learning dataset (see [`crate::record`]).
 
 use std::path::PathBuf;
 
@@ -29,6 +33,8 @@ pub struct Cli {
 pub enum Cmd {
     /// The paper's Table 1 and Figure 5: every scenario × method × seed in lock-step closed loop.
     Table(TableArgs),
+    /// Demonstrations of the privileged expert on the training scenarios, for imitation.
+    Record(RecordArgs),
     /// AMCL accuracy against the simulator's ground truth on tasks A–E (lock-step).
     AmclAccuracy {
         /// Comma-separated task letters.
@@ -114,6 +120,106 @@ pub struct TableArgs {
     /// A run with more interventions than this fails.
     #[arg(long, default_value_t = 30)]
     max_interventions: u32,
+}
+
+/// Arguments of `eval record`.
+#[derive(Debug, clap::Args)]
+pub struct RecordArgs {
+    /// Training scenario files (repeatable; default: every train_*.yaml of the scenarios
+    /// folder). Evaluation and behaviour scenarios are refused.
+    #[arg(long)]
+    scenario: Vec<PathBuf>,
+    /// Samples to record in all.
+    #[arg(long, default_value_t = 100_000)]
+    samples: usize,
+    /// Probability that an episode carries steering noise (labels stay the expert's).
+    #[arg(long, default_value_t = 0.2)]
+    noise: f64,
+    /// Largest turn-rate offset of a noise pulse in rad/s (the expert corrects offsets up to
+    /// about 0.25 rad/s; larger ones drag its labels along).
+    #[arg(long, default_value_t = 0.2)]
+    noise_peak_radps: f64,
+    /// Seed of the episodes (starts, goals, worlds, noise).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Episodes in parallel (default: the number of cores); the files do not depend on it.
+    #[arg(long)]
+    jobs: Option<usize>,
+    /// Side of the stored camera and LPE images in pixels (area-average downscale).
+    #[arg(long, default_value_t = 96)]
+    image_px: usize,
+    /// Store every K-th control cycle (1: every cycle, 10 Hz).
+    #[arg(long, default_value_t = 1)]
+    every: u64,
+    /// Simulated seconds an episode lasts at most.
+    #[arg(long, default_value_t = 120.0)]
+    episode_s: f64,
+    /// Samples per shard at most.
+    #[arg(long, default_value_t = 5000)]
+    shard_samples: usize,
+    /// Agent configuration TOML (its [amcl], [limits] and [safety] tables).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Folder of the train_*.yaml scenarios (default: $FLEET_SCENARIOS_DIR, ./sim/scenarios,
+    /// ./scenarios or the user data directory).
+    #[arg(long)]
+    scenarios: Option<PathBuf>,
+    /// Output folder: index.json and shard_NNNNN/*.npy (training/DATASET.md).
+    #[arg(long)]
+    out: PathBuf,
+}
+
+fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
+    let scenarios = if args.scenario.is_empty() {
+        let dir = protocol::data_dirs::find_scenarios_dir(args.scenarios.as_deref())?;
+        crate::record::training_scenarios(&dir)?
+    } else {
+        args.scenario.clone()
+    };
+    let options = crate::record::RecordOptions {
+        scenarios,
+        samples: args.samples,
+        noise: args.noise,
+        noise_peak_radps: args.noise_peak_radps,
+        seed: args.seed,
+        jobs: args.jobs.unwrap_or_else(|| {
+            std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
+        }),
+        image_px: args.image_px,
+        every: args.every,
+        episode_s: args.episode_s,
+        shard_samples: args.shard_samples,
+        run: TableOptions {
+            agent: read_agent_config(args.config.as_deref())?,
+            ..TableOptions::default()
+        },
+        command: std::env::args().collect::<Vec<_>>().join(" "),
+    };
+    options.validate()?;
+    let bar = indicatif::ProgressBar::new(args.samples as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "[{elapsed_precise}] [{bar:40}] {pos}/{len} samples ({per_sec}, eta {eta})",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let summary = crate::record::record(&options, &args.out, &|n| bar.inc(n))?;
+    bar.finish_and_clear();
+    #[allow(clippy::cast_precision_loss)]
+    let rate = summary.samples as f64 / summary.wall_s.max(1e-3);
+    println!(
+        "dataset {}: {} samples from {} episodes ({} with noise) in {} shards under {}; \
+         {rate:.1} samples/s, {:.0} simulated s in {:.0} s",
+        summary.dataset_id,
+        summary.samples,
+        summary.episodes,
+        summary.noisy_episodes,
+        summary.shards,
+        args.out.display(),
+        summary.simulated_s,
+        summary.wall_s
+    );
+    Ok(())
 }
 
 fn read_agent_config(config: Option<&std::path::Path>) -> anyhow::Result<AgentConfig> {
@@ -283,6 +389,7 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
 pub fn run(cli: &Cli) -> anyhow::Result<()> {
     match &cli.command {
         Cmd::Table(args) => run_table(args),
+        Cmd::Record(args) => run_record(args),
         Cmd::AmclAccuracy {
             tasks,
             seed,

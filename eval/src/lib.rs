@@ -4,6 +4,8 @@
 //! - [`amcl_accuracy`]: AMCL against the simulator's ground truth on tasks A–E, in lock-step.
 //! - [`expert`]: the privileged expert (method `expert`) that reads the ground truth and
 //!   demonstrates for imitation.
+//! - [`record`]: demonstrations of the expert on the training scenarios, recorded as an
+//!   imitation-learning dataset (`eval record`, `training/DATASET.md`).
 //! - [`figure`]: pictures of runs like the paper's Figure 5 (plan, planned path, traces).
 //! - [`cli`]: the `eval` command line.
 
@@ -12,4 +14,5 @@ pub mod cli;
 pub mod expert;
 pub mod figure;
 pub mod metrics;
+pub mod record;
 pub mod table;

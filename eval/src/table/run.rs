@@ -19,6 +19,7 @@ use map_core::OccupancyGrid;
 use planning::{stop_intention, Answer, Goal, GoalProgress, IntentionPlanner, PlanningMap};
 use protocol::{normalize_angle, ControllerKind, Intention, MapName, MapRef, Pose2D, TaskId};
 use robot_agent::controllers::Controller;
+use robot_agent::node::Decision;
 use robot_agent::{make_controller, AgentConfig, Supervisor};
 use serde::{Deserialize, Serialize};
 use sim::scenario::Role;
@@ -176,20 +177,79 @@ fn agent_config(
     agent
 }
 
+/// What a [`CycleObserver`] sees at the end of one control cycle (after the supervisor decided).
+pub struct Cycle<'a> {
+    /// Simulated time.
+    pub t_s: f64,
+    /// The world, mutable so that the observer can render the camera.
+    pub world: &'a mut World,
+    pub truth_pose: Pose2D,
+    /// The pose the agent published this cycle (`None`: no scan was processed).
+    pub estimate_pose: Option<Pose2D>,
+    /// The intention the supervisor got this cycle (`None`: none was answered).
+    pub intention: Option<&'a Intention>,
+    /// The supervisor's command (the method's controller through the safety rules).
+    pub decision: &'a Decision,
+    /// The goal the robot heads for.
+    pub goal_index: usize,
+}
+
+/// What the loop does after a [`CycleObserver`] saw a cycle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CycleOutcome {
+    /// The command the robot executes in the next step.
+    pub cmd: Command,
+    /// End the run now (it is then judged as if the time limit had come).
+    pub stop: bool,
+}
+
+/// A hook into every control cycle of [`run_with`]: `eval record` stores samples with it and
+/// perturbs the executed command (noise injection).
+pub trait CycleObserver {
+    /// Whether the pipeline renders the LPE image even for a method that does not read it.
+    fn render_lpe(&self) -> bool {
+        false
+    }
+
+    /// Called once per cycle after the supervisor's decision (not on a cycle that ends in an
+    /// intervention or with the last goal reached).
+    ///
+    /// # Errors
+    /// Any [`TableError`]; it ends the run with that error.
+    fn on_cycle(&mut self, cycle: Cycle<'_>) -> Result<CycleOutcome, TableError>;
+}
+
 /// Runs `method` on a prepared scenario with `seed` (mixed into the world's and AMCL's seeds;
 /// 0 keeps the scenario's own). `progress` gets the simulated seconds of every cycle.
 ///
 /// # Errors
 /// [`TableError`] when the world, the controller (e.g. a missing model) or the pipeline
 /// cannot be set up; what happens during the run is measured, not an error.
-#[allow(clippy::too_many_lines)]
 pub fn run_one(
     prepared: &Prepared,
     method: ControllerKind,
     seed: u64,
     options: &TableOptions,
-    mut progress: impl FnMut(f64),
+    progress: impl FnMut(f64),
 ) -> Result<(RunResult, RunTrace), TableError> {
+    run_with(prepared, method, seed, options, progress, None)
+}
+
+/// [`run_one`] with an optional [`CycleObserver`] that sees every cycle and chooses the
+/// executed command.
+///
+/// # Errors
+/// As [`run_one`], and whatever the observer returns.
+#[allow(clippy::too_many_lines)]
+pub fn run_with(
+    prepared: &Prepared,
+    method: ControllerKind,
+    seed: u64,
+    options: &TableOptions,
+    mut progress: impl FnMut(f64),
+    mut observer: Option<&mut dyn CycleObserver>,
+) -> Result<(RunResult, RunTrace), TableError> {
+    let render_lpe = method.reads_lpe() || observer.as_ref().is_some_and(|o| o.render_lpe());
     let started = Instant::now();
     let mut scenario = prepared.scenario.clone();
     scenario.seed ^= seed;
@@ -372,12 +432,15 @@ pub fn run_one(
         }
 
         // The planner service's answer to the published pose.
+        let estimate_pose = estimate.as_ref().map(|e| e.pose);
+        // A copy for the observer only (the supervisor takes the intention).
+        let mut answered: Option<Intention> = None;
         if let Some(estimate) = estimate {
             let header = estimate.header;
             let intention: Intention = match pipeline.answer(
                 &estimate,
                 &GoalProgress::new(&goals, goal_index),
-                method.reads_lpe(),
+                render_lpe,
             ) {
                 Answer::Done => {
                     goal_index = goals_total;
@@ -403,7 +466,7 @@ pub fn run_one(
                                     .planned_m
                                     .extend(p.path.iter().map(|q| (q.x_m, q.y_m)));
                             }
-                            p.intention(header, &estimate, task_id.clone(), k, method.reads_lpe())
+                            p.intention(header, &estimate, task_id.clone(), k, render_lpe)
                         }
                         Err(e) => {
                             tracing::debug!(scenario = %name, %method, seed, "replan failed: {e}");
@@ -412,6 +475,9 @@ pub fn run_one(
                     }
                 }
             };
+            if observer.is_some() {
+                answered = Some(intention.clone());
+            }
             if let Err(reason) = supervisor.on_intention(intention) {
                 tracing::warn!(scenario = %name, "intention refused: {reason}");
             }
@@ -437,6 +503,21 @@ pub fn run_one(
             v_mps: decision.cmd_v_mps,
             omega_radps: decision.cmd_omega_radps,
         };
+        if let Some(o) = observer.as_deref_mut() {
+            let outcome = o.on_cycle(Cycle {
+                t_s,
+                world: &mut world,
+                truth_pose,
+                estimate_pose,
+                intention: answered.as_ref(),
+                decision: &decision,
+                goal_index,
+            })?;
+            cmd = outcome.cmd;
+            if outcome.stop {
+                break;
+            }
+        }
     }
 
     let goals_reached = goal_index.min(goals_total);

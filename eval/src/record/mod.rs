@@ -1,0 +1,576 @@
+//! `eval record`: demonstrations of the privileged expert on the training scenarios, stored
+//! as a dataset for imitation learning (`training/DATASET.md` describes the files).
+//!
+//! Each episode is one closed-loop run ([`crate::table::run::run_with`]) with the expert
+//! driving through the agent's supervisor and the planning crate's intention pipeline, exactly
+//! as `eval table` runs it, on one training scenario (episode `e` uses scenario
+//! `e mod n`) with its own seed, mixed into the world's (people, sensor noise) and AMCL's: a
+//! random start and a random sequence of 2–4 goals on the floor plan, each reachable from the
+//! last and clear of the scenario's furniture and glass. A fraction `noise` of the episodes
+//! carries steering perturbations ([`episode`]) whose labels stay the expert's.
+//!
+//! Episodes run `jobs` at a time and are stored in episode order, and an episode depends on
+//! nothing but the seed and its number, so a recording is the same file for file for any
+//! number of jobs. Samples go to shards of at most `shard_samples` ([`writer`]).
+
+pub mod episode;
+pub mod image;
+pub mod npy;
+pub mod writer;
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use protocol::{ControllerKind, Pose2D};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use sha2::{Digest, Sha256};
+use sim::scenario::{PointSpec, PoseSpec, Role};
+use sim::{Scenario, SimConfig, World};
+
+use crate::table::judge::GoalDistance;
+use crate::table::run::{run_with, Prepared};
+use crate::table::{TableError, TableOptions};
+use episode::{Recorder, Sample};
+use writer::ShardWriter;
+
+/// Version of the dataset layout in `index.json`.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// Why a recording could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    #[error("invalid {field} = {value}: {reason}")]
+    Invalid {
+        field: &'static str,
+        value: String,
+        reason: String,
+    },
+    #[error("scenario {path} has role {role}: only training scenarios may be recorded (evaluation and behaviour scenarios must stay unseen)")]
+    NotTraining { path: String, role: String },
+    #[error("scenario {path}: {reason}")]
+    Scenario { path: String, reason: String },
+    #[error(transparent)]
+    Run(#[from] TableError),
+    #[error("cannot write {}: {reason}", path.display())]
+    Write { path: PathBuf, reason: String },
+}
+
+/// What to record.
+#[derive(Debug, Clone)]
+pub struct RecordOptions {
+    /// Training scenario files.
+    pub scenarios: Vec<PathBuf>,
+    /// Samples to store in all.
+    pub samples: usize,
+    /// Probability that an episode carries steering noise.
+    pub noise: f64,
+    /// Largest turn-rate offset of a noise pulse. Kept below the expert's resynchronisation
+    /// threshold (`Expert::sync_motion` adopts the measured motion as its own command state
+    /// when it differs from its command by more than 0.25 rad/s): above it the expert's
+    /// command starts from the perturbed motion and its label follows the perturbation
+    /// instead of correcting it.
+    pub noise_peak_radps: f64,
+    pub seed: u64,
+    /// Episodes run in parallel.
+    pub jobs: usize,
+    /// Side of the stored square images in pixels.
+    pub image_px: usize,
+    /// Store every `every`-th control cycle (1: all, 10 Hz).
+    pub every: u64,
+    /// Simulated length limit of one episode.
+    pub episode_s: f64,
+    /// Samples per shard at most.
+    pub shard_samples: usize,
+    /// Shared run settings (the expert's and the agent's configuration, the cycle).
+    pub run: TableOptions,
+    /// The command line, for `index.json` (not part of the dataset id).
+    pub command: String,
+}
+
+impl Default for RecordOptions {
+    fn default() -> Self {
+        Self {
+            scenarios: Vec::new(),
+            samples: 100_000,
+            noise: 0.2,
+            noise_peak_radps: 0.2,
+            seed: 0,
+            jobs: 1,
+            image_px: 96,
+            every: 1,
+            episode_s: 120.0,
+            shard_samples: 5000,
+            run: TableOptions::default(),
+            command: String::new(),
+        }
+    }
+}
+
+/// What a recording did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Summary {
+    pub dataset_id: String,
+    pub samples: usize,
+    /// Episodes that contributed samples.
+    pub episodes: usize,
+    pub noisy_episodes: usize,
+    pub shards: usize,
+    /// Simulated seconds of all episodes run (including samples cut off at the end).
+    pub simulated_s: f64,
+    pub wall_s: f64,
+}
+
+/// The training scenarios of a scenarios folder: `train_*.yaml`, sorted.
+///
+/// # Errors
+/// [`RecordError::Scenario`] when the folder cannot be listed or has none.
+pub fn training_scenarios(dir: &Path) -> Result<Vec<PathBuf>, RecordError> {
+    let err = |reason: String| RecordError::Scenario {
+        path: dir.display().to_string(),
+        reason,
+    };
+    let mut found: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(|e| err(e.to_string()))?
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .filter(|p| {
+            p.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n.starts_with("train_") && n.ends_with(".yaml"))
+        })
+        .collect();
+    found.sort();
+    if found.is_empty() {
+        return Err(err("no train_*.yaml".into()));
+    }
+    Ok(found)
+}
+
+impl RecordOptions {
+    /// Checks the numbers and that every scenario is a training one.
+    ///
+    /// # Errors
+    /// [`RecordError::Invalid`] naming the field, [`RecordError::NotTraining`] naming the file
+    /// and its role, [`RecordError::Scenario`] for an unreadable file.
+    pub fn validate(&self) -> Result<(), RecordError> {
+        let invalid = |field, value: String, reason: &str| RecordError::Invalid {
+            field,
+            value,
+            reason: reason.into(),
+        };
+        if self.scenarios.is_empty() {
+            return Err(invalid("scenarios", "[]".into(), "need at least one"));
+        }
+        if self.samples == 0 {
+            return Err(invalid("samples", "0".into(), "need at least one"));
+        }
+        if !(0.0..=1.0).contains(&self.noise) {
+            return Err(invalid(
+                "noise",
+                self.noise.to_string(),
+                "must be in [0, 1]",
+            ));
+        }
+        if !(self.noise_peak_radps.is_finite()
+            && self.noise_peak_radps > 0.0
+            && self.noise_peak_radps <= self.run.agent.limits.max_turn_radps)
+        {
+            return Err(invalid(
+                "noise_peak_radps",
+                self.noise_peak_radps.to_string(),
+                "must be in (0, the turn-rate limit]",
+            ));
+        }
+        if self.jobs == 0 {
+            return Err(invalid("jobs", "0".into(), "need at least one"));
+        }
+        if !(8..=1024).contains(&self.image_px) {
+            return Err(invalid(
+                "image_px",
+                self.image_px.to_string(),
+                "must be in 8..=1024",
+            ));
+        }
+        if self.every == 0 {
+            return Err(invalid("every", "0".into(), "must be at least 1"));
+        }
+        if !(self.episode_s.is_finite() && self.episode_s >= 1.0) {
+            return Err(invalid(
+                "episode_s",
+                self.episode_s.to_string(),
+                "must be at least 1 s",
+            ));
+        }
+        if self.shard_samples == 0 {
+            return Err(invalid("shard_samples", "0".into(), "need at least one"));
+        }
+        self.run.validate(&[ControllerKind::Expert])?;
+        for path in &self.scenarios {
+            let scenario = Scenario::load(path).map_err(|e| RecordError::Scenario {
+                path: path.display().to_string(),
+                reason: e.to_string(),
+            })?;
+            if scenario.role != Role::Training {
+                return Err(RecordError::NotTraining {
+                    path: path.display().to_string(),
+                    role: format!("{:?}", scenario.role).to_lowercase(),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// A hash of everything that determines the samples (settings and scenario files).
+    ///
+    /// # Errors
+    /// [`RecordError::Scenario`] for an unreadable scenario file.
+    pub fn dataset_id(&self) -> Result<String, RecordError> {
+        let mut h = Sha256::new();
+        h.update(
+            format!(
+                "intention-fleet demonstrations v{FORMAT_VERSION}; seed {}; samples {}; noise {:?} peak {:?}; \
+                 image_px {}; every {}; episode_s {:?}; shard_samples {}; dt_s {:?}; expert {:?}\n",
+                self.seed,
+                self.samples,
+                self.noise,
+                self.noise_peak_radps,
+                self.image_px,
+                self.every,
+                self.episode_s,
+                self.shard_samples,
+                self.run.dt_s,
+                self.run.expert,
+            )
+            .as_bytes(),
+        );
+        for path in &self.scenarios {
+            let bytes = std::fs::read(path).map_err(|e| RecordError::Scenario {
+                path: path.display().to_string(),
+                reason: e.to_string(),
+            })?;
+            h.update(Sha256::digest(&bytes));
+        }
+        Ok(hex::encode(&h.finalize()[..8]))
+    }
+}
+
+/// SplitMix64: decorrelates the seeds of neighbouring episodes.
+fn mix(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// The seed of episode `episode` of a recording seeded `seed`.
+#[must_use]
+pub fn episode_seed(seed: u64, episode: u64) -> u64 {
+    mix(seed ^ mix(episode))
+}
+
+/// A scenario loaded for recording, with a world to check candidate poses against.
+struct Loaded {
+    prepared: Prepared,
+    world: World,
+}
+
+/// Clearance around the robot's disc that a start (people included) and a goal (furniture
+/// and glass) keep.
+const START_CLEARANCE_M: f64 = 0.15;
+const GOAL_CLEARANCE_M: f64 = 0.3;
+/// Start→goal and goal→goal straight-line distance at least.
+const MIN_LEG_M: f64 = 4.0;
+
+/// Where an episode starts and the goals it visits, with their distance fields for the judge.
+struct EpisodePlan {
+    start: Pose2D,
+    goal_distance: Vec<GoalDistance>,
+    goals: Vec<(f64, f64)>,
+}
+
+/// Start and goals of one episode: random points in the plan's inflated free space, clear of
+/// the world's furniture and glass, each goal reachable along the plan from the point before.
+/// `None` when the scenario has no room for them.
+fn plan_episode(loaded: &Loaded, seed: u64) -> Option<EpisodePlan> {
+    let prepared = &loaded.prepared;
+    let radius_m = SimConfig::default().base.radius_m;
+    let pairs = planning::sample::sample_pairs(
+        &prepared.planning,
+        24,
+        seed,
+        MIN_LEG_M,
+        &prepared.scenario.name,
+    )
+    .ok()?;
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5EED);
+    let wanted = rng.gen_range(2..=4usize);
+    let clear = |p: &Pose2D, r: f64, people: bool| {
+        loaded
+            .world
+            .disc_overlap(p.x_m, p.y_m, radius_m + r, None, people)
+            .is_none()
+    };
+    let start = pairs
+        .iter()
+        .map(|(s, _)| *s)
+        .find(|s| clear(s, START_CLEARANCE_M, true))?;
+    let mut goals: Vec<(f64, f64)> = Vec::new();
+    let mut distances = Vec::new();
+    let mut last = start;
+    for candidate in pairs.iter().flat_map(|(s, g)| [*g, *s]) {
+        if goals.len() == wanted {
+            break;
+        }
+        if candidate.distance_m(&last) < MIN_LEG_M || !clear(&candidate, GOAL_CLEARANCE_M, false) {
+            continue;
+        }
+        let d = GoalDistance::new(&prepared.plan, candidate.x_m, candidate.y_m);
+        if !d.at(last.x_m, last.y_m).is_finite() {
+            continue;
+        }
+        goals.push((candidate.x_m, candidate.y_m));
+        distances.push(d);
+        last = candidate;
+    }
+    (goals.len() >= 2).then_some(EpisodePlan {
+        start,
+        goal_distance: distances,
+        goals,
+    })
+}
+
+/// What one episode gave.
+struct Episode {
+    scenario: usize,
+    noisy: bool,
+    samples: Vec<Sample>,
+    simulated_s: f64,
+}
+
+fn run_episode(
+    loaded: &Loaded,
+    scenario: usize,
+    seed: u64,
+    noisy: bool,
+    max_samples: usize,
+    options: &RecordOptions,
+    progress: &(dyn Fn(u64) + Sync),
+) -> Result<Episode, RecordError> {
+    let empty = Episode {
+        scenario,
+        noisy,
+        samples: Vec::new(),
+        simulated_s: 0.0,
+    };
+    let Some(EpisodePlan {
+        start,
+        goal_distance,
+        goals,
+    }) = plan_episode(loaded, seed)
+    else {
+        tracing::warn!(scenario = %loaded.prepared.scenario.name, seed, "no room for an episode");
+        return Ok(empty);
+    };
+    let base = &loaded.prepared;
+    let mut scenario_spec = base.scenario.clone();
+    scenario_spec.start = PoseSpec {
+        x_m: start.x_m,
+        y_m: start.y_m,
+        yaw_rad: start.yaw_rad,
+    };
+    scenario_spec.goals = goals
+        .iter()
+        .map(|&(x_m, y_m)| PointSpec { x_m, y_m })
+        .collect();
+    let prepared = Prepared {
+        path: base.path.clone(),
+        scenario: scenario_spec,
+        plan: base.plan.clone(),
+        planning: Arc::clone(&base.planning),
+        goal_distance,
+    };
+    let mut run = options.run.clone();
+    run.time_limit_s = Some(options.episode_s);
+    let mut recorder = Recorder::new(
+        options.image_px,
+        options.every,
+        max_samples,
+        run.agent.limits,
+        noisy.then(|| (mix(seed ^ 0x0015_E000), options.noise_peak_radps)),
+        progress,
+    );
+    let mut simulated_s = 0.0;
+    match run_with(
+        &prepared,
+        ControllerKind::Expert,
+        seed,
+        &run,
+        |t_s| simulated_s = t_s,
+        Some(&mut recorder),
+    ) {
+        Ok(_) => {}
+        // A person standing on the start: the episode is skipped (still deterministic).
+        Err(TableError::Setup {
+            what: "robot",
+            reason,
+        }) => {
+            tracing::warn!(scenario = %base.scenario.name, seed, "episode skipped: {reason}");
+            return Ok(empty);
+        }
+        Err(e) => return Err(e.into()),
+    }
+    Ok(Episode {
+        scenario,
+        noisy,
+        samples: recorder.samples,
+        simulated_s,
+    })
+}
+
+/// Records `options.samples` samples into `out` (created if needed): the shards and
+/// `index.json`, every file written atomically, `index.json` last. `progress` gets the number
+/// of samples each time some are taken (from the worker threads; the total may run past
+/// `options.samples` in the last episodes, whose surplus is dropped).
+///
+/// # Errors
+/// [`RecordError`] for invalid options, a scenario that is not a training one or cannot be
+/// loaded, a run that cannot be set up, or a file that cannot be written.
+pub fn record(
+    options: &RecordOptions,
+    out: &Path,
+    progress: &(dyn Fn(u64) + Sync),
+) -> Result<Summary, RecordError> {
+    let started = Instant::now();
+    options.validate()?;
+    let dataset_id = options.dataset_id()?;
+    let loaded: Vec<Loaded> = options
+        .scenarios
+        .iter()
+        .map(|path| {
+            let prepared = Prepared::load(path, &options.run)?;
+            let world = World::new(
+                prepared.scenario.clone(),
+                prepared.plan.clone(),
+                SimConfig::default(),
+            )
+            .map_err(|e| RecordError::Scenario {
+                path: path.display().to_string(),
+                reason: e.to_string(),
+            })?;
+            Ok(Loaded { prepared, world })
+        })
+        .collect::<Result<_, RecordError>>()?;
+    std::fs::create_dir_all(out).map_err(|e| RecordError::Write {
+        path: out.to_path_buf(),
+        reason: e.to_string(),
+    })?;
+    let mut writer = ShardWriter::new(out, options.image_px, options.shard_samples);
+    let (mut episodes, mut noisy_episodes, mut simulated_s) = (0usize, 0usize, 0.0f64);
+    let mut next_episode = 0u64;
+    // Episodes that give nothing (no room, blocked start) must not loop for ever.
+    let mut empty_in_a_row = 0usize;
+    while writer.samples() < options.samples {
+        let remaining = options.samples - writer.samples();
+        let batch: Vec<u64> = (next_episode..next_episode + options.jobs as u64).collect();
+        next_episode += options.jobs as u64;
+        let results: Vec<Result<Episode, RecordError>> = std::thread::scope(|s| {
+            let handles: Vec<_> = batch
+                .iter()
+                .map(|&e| {
+                    let loaded = &loaded;
+                    s.spawn(move || {
+                        let seed = episode_seed(options.seed, e);
+                        #[allow(clippy::cast_possible_truncation)]
+                        let scenario = (e % loaded.len() as u64) as usize;
+                        let noisy = ChaCha8Rng::seed_from_u64(seed).gen_bool(options.noise);
+                        run_episode(
+                            &loaded[scenario],
+                            scenario,
+                            seed,
+                            noisy,
+                            remaining,
+                            options,
+                            progress,
+                        )
+                    })
+                })
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| {
+                    h.join().unwrap_or_else(|_| {
+                        Err(RecordError::Run(TableError::Setup {
+                            what: "episode",
+                            reason: "worker thread panicked".into(),
+                        }))
+                    })
+                })
+                .collect()
+        });
+        for (e, result) in batch.iter().zip(results) {
+            let episode = result?;
+            simulated_s += episode.simulated_s;
+            if writer.samples() >= options.samples {
+                continue;
+            }
+            if episode.samples.is_empty() {
+                empty_in_a_row += 1;
+                if empty_in_a_row > 50 {
+                    return Err(RecordError::Scenario {
+                        path: options.scenarios[episode.scenario].display().to_string(),
+                        reason: "50 episodes in a row gave no samples".into(),
+                    });
+                }
+                continue;
+            }
+            empty_in_a_row = 0;
+            episodes += 1;
+            noisy_episodes += usize::from(episode.noisy);
+            #[allow(clippy::cast_possible_truncation)]
+            let (scenario, id) = (episode.scenario as u32, *e as u32);
+            for sample in episode.samples {
+                if writer.samples() >= options.samples {
+                    break;
+                }
+                writer.push(&sample, scenario, id, episode.noisy)?;
+            }
+        }
+    }
+    let shards = writer.finish(&index_header(options, &dataset_id, &loaded))?;
+    Ok(Summary {
+        dataset_id,
+        samples: writer.samples(),
+        episodes,
+        noisy_episodes,
+        shards,
+        simulated_s,
+        wall_s: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// The part of `index.json` that does not depend on the shards.
+fn index_header(options: &RecordOptions, dataset_id: &str, loaded: &[Loaded]) -> serde_json::Value {
+    serde_json::json!({
+        "format": "intention-fleet-demonstrations",
+        "version": FORMAT_VERSION,
+        "dataset_id": dataset_id,
+        "command": options.command,
+        "seed": options.seed,
+        "noise": options.noise,
+        "noise_peak_radps": options.noise_peak_radps,
+        "image_px": options.image_px,
+        "every_cycles": options.every,
+        "dt_s": options.run.dt_s,
+        "episode_s": options.episode_s,
+        "max_speed_mps": options.run.agent.limits.max_speed_mps,
+        "max_turn_radps": options.run.agent.limits.max_turn_radps,
+        "dlm": ["turn_left", "turn_right", "go_forward", "stop"],
+        "scenarios": loaded.iter().enumerate().map(|(i, l)| serde_json::json!({
+            "index": i,
+            "name": l.prepared.scenario.name,
+            "path": l.prepared.path.display().to_string(),
+        })).collect::<Vec<_>>(),
+    })
+}

@@ -1,0 +1,270 @@
+//! `eval record`: a short recording on one training scenario, checked file by file (index,
+//! shard shapes and dtypes, label ranges, DLM values, noise injection), its determinism, and
+//! the refusal of a scenario that is not a training one.
+
+#![allow(clippy::unwrap_used)]
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use eval::record::{record, RecordError, RecordOptions};
+
+fn scenario(name: &str) -> PathBuf {
+    test_support::scenarios_dir().join(name)
+}
+
+fn options(noise: f64, jobs: usize) -> RecordOptions {
+    RecordOptions {
+        scenarios: vec![scenario("train_lab.yaml")],
+        samples: 300,
+        noise,
+        seed: 3,
+        jobs,
+        image_px: 32,
+        episode_s: 12.0,
+        shard_samples: 128,
+        ..RecordOptions::default()
+    }
+}
+
+/// A parsed `.npy` file: descr, shape and the data bytes.
+fn read_npy(path: &Path) -> (String, Vec<usize>, Vec<u8>) {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    assert_eq!(&bytes[..8], b"\x93NUMPY\x01\x00", "{}", path.display());
+    let len = usize::from(u16::from_le_bytes([bytes[8], bytes[9]]));
+    assert_eq!((10 + len) % 64, 0, "data of {} not aligned", path.display());
+    let header = std::str::from_utf8(&bytes[10..10 + len]).unwrap();
+    let descr = header
+        .split("'descr': '")
+        .nth(1)
+        .unwrap()
+        .split('\'')
+        .next()
+        .unwrap();
+    let shape: Vec<usize> = header
+        .split("'shape': (")
+        .nth(1)
+        .unwrap()
+        .split(')')
+        .next()
+        .unwrap()
+        .split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .map(|s| s.parse().unwrap())
+        .collect();
+    (descr.to_string(), shape, bytes[10 + len..].to_vec())
+}
+
+fn f32s(data: &[u8]) -> Vec<f32> {
+    data.chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect()
+}
+
+/// Every field of a recording concatenated over its shards (descr checked against the index).
+fn read_all(dir: &Path) -> (serde_json::Value, BTreeMap<String, Vec<u8>>) {
+    let index: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("index.json")).unwrap()).unwrap();
+    let mut fields: BTreeMap<String, Vec<u8>> = BTreeMap::new();
+    for shard in index["shards"].as_array().unwrap() {
+        let n = shard["samples"].as_u64().unwrap() as usize;
+        for (name, spec) in index["fields"].as_object().unwrap() {
+            let file = shard["files"][name].as_str().unwrap();
+            let (descr, shape, data) = read_npy(&dir.join(file));
+            let want_descr = match spec["dtype"].as_str().unwrap() {
+                "uint8" => "|u1",
+                "uint32" => "<u4",
+                "float32" => "<f4",
+                other => panic!("dtype {other}"),
+            };
+            assert_eq!(descr, want_descr, "{file}");
+            let mut want_shape = vec![n];
+            want_shape.extend(
+                spec["shape"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|d| d.as_u64().unwrap() as usize),
+            );
+            assert_eq!(shape, want_shape, "{file}");
+            let elem = if descr == "|u1" { 1 } else { 4 };
+            assert_eq!(data.len(), shape.iter().product::<usize>() * elem, "{file}");
+            fields.entry(name.clone()).or_default().extend(data);
+        }
+    }
+    (index, fields)
+}
+
+#[test]
+fn a_short_recording_has_the_documented_files_and_values() {
+    let out = tempfile::tempdir().unwrap();
+    let summary = record(&options(1.0, 2), out.path(), &|_| {}).unwrap();
+    assert_eq!(summary.samples, 300);
+    let (index, fields) = read_all(out.path());
+    assert_eq!(index["format"], "intention-fleet-demonstrations");
+    assert_eq!(index["samples"], 300);
+    assert_eq!(index["image_px"], 32);
+    assert_eq!(index["dataset_id"], summary.dataset_id.as_str());
+    assert_eq!(index["scenarios"][0]["name"], "train_lab");
+    // 300 samples in shards of 128.
+    let counts: Vec<u64> = index["shards"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["samples"].as_u64().unwrap())
+        .collect();
+    assert_eq!(counts, vec![128, 128, 44]);
+    assert_eq!(fields["camera"].len(), 300 * 32 * 32 * 3);
+    assert_eq!(fields["lpe"].len(), 300 * 32 * 32 * 3);
+    // Images are not blank: the camera sees a world, the LPE draws a map.
+    for name in ["camera", "lpe"] {
+        let px = &fields[name];
+        assert!(px.iter().any(|&v| v != px[0]), "{name} is uniform");
+    }
+
+    let label = f32s(&fields["label"]);
+    let executed = f32s(&fields["executed"]);
+    assert!(label
+        .iter()
+        .chain(&executed)
+        .all(|v| (-1.0..=1.0).contains(v)));
+    assert!(
+        label.chunks(2).any(|c| c[0] > 0.1),
+        "the expert never drove"
+    );
+    assert!(fields["dlm"].iter().all(|&d| d < 4));
+    assert!(fields["scenario"].chunks(4).all(|c| c == [0, 0, 0, 0]));
+    assert!(fields["noisy"].iter().all(|&n| n == 1));
+    // Episodes end at the first cycle past 12 s.
+    let t = f32s(&fields["t_s"]);
+    assert!(t
+        .iter()
+        .all(|v| v.is_finite() && *v > 0.0 && *v <= 12.0 + 0.1 + 1e-3));
+    let pose = f32s(&fields["pose_true"]);
+    assert!(pose.iter().all(|v| v.is_finite()));
+
+    // Noise goes into what the robot executes, the speed is never touched.
+    let perturbed = label
+        .chunks(2)
+        .zip(executed.chunks(2))
+        .filter(|(l, e)| (l[1] - e[1]).abs() > 1e-4)
+        .count();
+    assert!(perturbed > 30, "only {perturbed} perturbed samples");
+    assert!(label
+        .chunks(2)
+        .zip(executed.chunks(2))
+        .all(|(l, e)| l[0] == e[0]));
+    // The labels correct the push: pushed left (executed ω above the label), the expert turns
+    // right on average, and the other way round.
+    let mean_label_w = |left: bool| {
+        let ws: Vec<f32> = label
+            .chunks(2)
+            .zip(executed.chunks(2))
+            .filter(|(l, e)| {
+                if left {
+                    e[1] - l[1] > 0.05
+                } else {
+                    e[1] - l[1] < -0.05
+                }
+            })
+            .map(|(l, _)| l[1])
+            .collect();
+        assert!(ws.len() > 10);
+        ws.iter().sum::<f32>() / ws.len() as f32
+    };
+    let (left, right) = (mean_label_w(true), mean_label_w(false));
+    assert!(
+        left < right,
+        "label ω {left} when pushed left, {right} when pushed right"
+    );
+
+    // The labels are the expert's for the state: the same episodes without noise give the
+    // same labels until the first perturbation (≥ 1 s in), then the states part.
+    let clean_dir = tempfile::tempdir().unwrap();
+    record(&options(0.0, 2), clean_dir.path(), &|_| {}).unwrap();
+    let (_, clean) = read_all(clean_dir.path());
+    let clean_label = f32s(&clean["label"]);
+    let clean_exec = f32s(&clean["executed"]);
+    assert_eq!(clean_label, clean_exec, "no noise: executed is the label");
+    assert!(clean["noisy"].iter().all(|&n| n == 0));
+    assert_eq!(clean["episode"], fields["episode"]);
+    let first = label
+        .chunks(2)
+        .zip(executed.chunks(2))
+        .position(|(l, e)| (l[1] - e[1]).abs() > 1e-4)
+        .unwrap();
+    assert!(first >= 5);
+    assert_eq!(label[..2 * first], clean_label[..2 * first]);
+    assert_ne!(label, clean_label);
+}
+
+#[test]
+fn recordings_are_deterministic_for_any_number_of_jobs() {
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let mut o = options(0.5, 1);
+    o.samples = 250;
+    record(&o, a.path(), &|_| {}).unwrap();
+    o.jobs = 3;
+    record(&o, b.path(), &|_| {}).unwrap();
+    let files = |dir: &Path| -> BTreeMap<PathBuf, Vec<u8>> {
+        let mut out = BTreeMap::new();
+        let mut stack = vec![dir.to_path_buf()];
+        while let Some(d) = stack.pop() {
+            for e in std::fs::read_dir(&d).unwrap() {
+                let p = e.unwrap().path();
+                if p.is_dir() {
+                    stack.push(p);
+                } else {
+                    out.insert(
+                        p.strip_prefix(dir).unwrap().to_path_buf(),
+                        std::fs::read(&p).unwrap(),
+                    );
+                }
+            }
+        }
+        out
+    };
+    let (fa, fb) = (files(a.path()), files(b.path()));
+    assert!(fa.len() > 10);
+    assert_eq!(fa.keys().collect::<Vec<_>>(), fb.keys().collect::<Vec<_>>());
+    for (k, v) in &fa {
+        assert!(v == &fb[k], "{} differs", k.display());
+    }
+}
+
+#[test]
+fn evaluation_and_behaviour_scenarios_are_refused() {
+    for (file, role) in [
+        ("task_a.yaml", "evaluation"),
+        ("behaviour_glass_door.yaml", "behaviour"),
+    ] {
+        let mut o = options(0.0, 1);
+        o.scenarios.push(scenario(file));
+        let out = tempfile::tempdir().unwrap();
+        let err = record(&o, out.path(), &|_| {}).unwrap_err();
+        assert!(matches!(err, RecordError::NotTraining { .. }), "{err}");
+        let text = err.to_string();
+        assert!(text.contains(file) && text.contains(role), "{text}");
+        // Nothing was written.
+        assert!(std::fs::read_dir(out.path()).unwrap().next().is_none());
+    }
+}
+
+#[test]
+fn the_command_line_refuses_an_evaluation_scenario() {
+    let out = tempfile::tempdir().unwrap();
+    let result = Command::new(env!("CARGO_BIN_EXE_eval"))
+        .args(["record", "--samples", "10", "--scenario"])
+        .arg(scenario("task_a.yaml"))
+        .arg("--out")
+        .arg(out.path())
+        .output()
+        .unwrap();
+    assert!(!result.status.success());
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(
+        stderr.contains("task_a.yaml") && stderr.contains("evaluation"),
+        "{stderr}"
+    );
+}
