@@ -268,3 +268,41 @@ fn the_command_line_refuses_an_evaluation_scenario() {
         "{stderr}"
     );
 }
+
+/// The Python reader of `training/dataset.py` (what training uses) reads a recording and agrees
+/// with the index. It runs the repository's `.venv` (made by `scripts/setup.sh`, whose
+/// onnxruntime brings NumPy); `FLEET_PYTHON` names another interpreter.
+#[test]
+fn the_python_reader_reads_a_recording() {
+    let root = test_support::repo_root();
+    let python = std::env::var_os("FLEET_PYTHON")
+        .map_or_else(|| root.join(".venv/bin/python"), PathBuf::from);
+    assert!(
+        python.exists(),
+        "no Python at {} (run scripts/setup.sh, or set FLEET_PYTHON)",
+        python.display()
+    );
+    let out = tempfile::tempdir().unwrap();
+    let summary = record(&options(1.0, 1), out.path(), &|_| {}).unwrap();
+    let output = Command::new(&python)
+        .arg(root.join("training/dataset.py"))
+        .arg(out.path())
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        output.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(
+        stdout.contains(&format!(
+            "dataset {} in {}: {} samples",
+            summary.dataset_id,
+            out.path().display(),
+            summary.samples
+        )),
+        "{stdout}"
+    );
+    assert!(stdout.contains("per DLM:"), "{stdout}");
+}
