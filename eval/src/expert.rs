@@ -64,7 +64,7 @@
 use std::collections::BinaryHeap;
 use std::sync::{Arc, Mutex, PoisonError};
 
-use map_core::search::MinCost;
+use map_core::search::{MinCost, NEIGHBOURS_8};
 use map_core::{DistanceField, GridGeometry, Sources};
 use protocol::{normalize_angle, Dlm, Pose2D};
 use robot_agent::controllers::path_tracker::{pursuit_curvature, to_robot_frame};
@@ -559,17 +559,6 @@ impl Search {
         None
     }
 }
-
-const NEIGHBOURS_8: [(i64, i64); 8] = [
-    (1, 0),
-    (-1, 0),
-    (0, 1),
-    (0, -1),
-    (1, 1),
-    (1, -1),
-    (-1, 1),
-    (-1, -1),
-];
 
 /// A detour around an obstruction on the planner's path, kept between cycles.
 #[derive(Debug, Clone)]

@@ -1,7 +1,21 @@
 //! What the grid searches around the maps share (the judge's and the dynamic window's
-//! Dijkstra, the expert's A*): a priority-queue entry ordered for a min-first pop.
+//! Dijkstra, the expert's A*): the 8-neighbourhood and a priority-queue entry ordered for a
+//! min-first pop.
 
 use std::cmp::Ordering;
+
+/// The 8-connected neighbourhood of a grid cell as (dx, dy) offsets: the four sides first, then
+/// the diagonals.
+pub const NEIGHBOURS_8: [(i64, i64); 8] = [
+    (1, 0),
+    (-1, 0),
+    (0, 1),
+    (0, -1),
+    (1, 1),
+    (1, -1),
+    (-1, 1),
+    (-1, -1),
+];
 
 /// A cost that can be totally ordered (floats by `total_cmp`, so NaN cannot break a heap).
 pub trait Cost: Copy + PartialEq {

@@ -5,7 +5,7 @@
 
 use std::collections::BinaryHeap;
 
-use map_core::search::MinCost;
+use map_core::search::{MinCost, NEIGHBOURS_8};
 use map_core::{classify, CellClass, OccupancyGrid};
 use protocol::Pose2D;
 use sim::{Obstacle, World};
@@ -52,16 +52,7 @@ impl GoalDistance {
                 continue;
             }
             let (cx, cy) = (i64::from(i % w), i64::from(i / w));
-            for (dx, dy) in [
-                (1, 0),
-                (-1, 0),
-                (0, 1),
-                (0, -1),
-                (1, 1),
-                (1, -1),
-                (-1, 1),
-                (-1, -1),
-            ] {
+            for (dx, dy) in NEIGHBOURS_8 {
                 let (nx, ny) = (cx + dx, cy + dy);
                 if !free(nx, ny) {
                     continue;
