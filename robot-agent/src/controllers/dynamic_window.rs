@@ -21,20 +21,8 @@
 //! (after Brock & Khatib's global dynamic window, 1999) then supplies a detour point to head
 //! for, with hysteresis so that the robot keeps to the side it chose.
 
-use map_core::search::MinCost;
+use map_core::search::{MinCost, NEIGHBOURS_8};
 use protocol::normalize_angle;
-
-/// The 8-connected neighbourhood of a grid cell, as (dx, dy) offsets.
-const NEIGHBOURS_8: [(isize, isize); 8] = [
-    (1, 0),
-    (-1, 0),
-    (0, 1),
-    (0, -1),
-    (1, 1),
-    (1, -1),
-    (-1, 1),
-    (-1, -1),
-];
 
 use super::path_tracker::{check_non_negative, check_positive};
 use super::path_tracker::{checked_task, goal_speed_cap, to_robot_frame, window};
@@ -363,13 +351,13 @@ impl NavGrid {
 
     /// Dijkstra from the seeds over free cells, 8-connected.
     fn propagate(&mut self) {
-        let n = self.n as isize;
+        let n = self.n as i64;
         let diag = self.res_m * std::f64::consts::SQRT_2;
         while let Some(MinCost(v, i)) = self.heap.pop() {
             if v > self.value[i] {
                 continue;
             }
-            let (cx, cy) = ((i % self.n) as isize, (i / self.n) as isize);
+            let (cx, cy) = ((i % self.n) as i64, (i / self.n) as i64);
             for (dx, dy) in NEIGHBOURS_8 {
                 let (nx, ny) = (cx + dx, cy + dy);
                 if nx < 0 || ny < 0 || nx >= n || ny >= n {
@@ -440,11 +428,11 @@ impl NavGrid {
     /// point still in straight sight of the robot.
     fn visible_carrot(&self, distance_m: f64) -> Option<(f64, f64)> {
         let mut i = self.cell(0.0, 0.0)?;
-        let n = self.n as isize;
+        let n = self.n as i64;
         let mut travelled = 0.0;
         let mut best = None;
         while travelled < distance_m {
-            let (cx, cy) = ((i % self.n) as isize, (i / self.n) as isize);
+            let (cx, cy) = ((i % self.n) as i64, (i / self.n) as i64);
             let mut next = i;
             for (dx, dy) in NEIGHBOURS_8 {
                 let (nx, ny) = (cx + dx, cy + dy);
