@@ -10,7 +10,7 @@
 //! covariance, as the operator who carried the robot would set its pose estimate; the settling
 //! after it counts too.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use robot_agent::ControllerKind;
 use serde::Serialize;
@@ -87,14 +87,6 @@ impl From<&RunResult> for TaskAccuracy {
                 && r.mean_heading_error_deg <= MAX_MEAN_HEADING_ERROR_DEG,
         }
     }
-}
-
-/// `sim/scenarios/task_<letter>.yaml` for a task letter `a`..`e`.
-///
-/// # Errors
-/// [`TableError::Invalid`] for anything but one of `a`–`e`.
-pub fn task_scenario(scenarios_dir: &Path, task: &str) -> Result<PathBuf, TableError> {
-    table::task_scenario(scenarios_dir, task)
 }
 
 /// Runs one task; `progress` gets the simulated seconds of every cycle.

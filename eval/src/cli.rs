@@ -403,7 +403,7 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
             let scenarios = protocol::data_dirs::find_scenarios_dir(scenarios.as_deref())?;
             let paths = tasks
                 .iter()
-                .map(|t| amcl_accuracy::task_scenario(&scenarios, t))
+                .map(|t| table::task_scenario(&scenarios, t))
                 .collect::<Result<Vec<_>, _>>()?;
             let options = AccuracyOptions {
                 seed: *seed,

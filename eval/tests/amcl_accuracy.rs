@@ -9,13 +9,13 @@
 use std::path::Path;
 
 use eval::amcl_accuracy::{self, AccuracyOptions};
-use eval::table::TableOptions;
+use eval::table::{self, TableOptions};
 use protocol::ControllerKind;
 
 #[test]
 fn task_b_meets_the_accuracy_requirement_with_the_defaults() {
     let scenarios = Path::new(env!("CARGO_MANIFEST_DIR")).join("../sim/scenarios");
-    let path = amcl_accuracy::task_scenario(&scenarios, "b").unwrap();
+    let path = table::task_scenario(&scenarios, "b").unwrap();
     let options = AccuracyOptions {
         controller: ControllerKind::Expert,
         ..AccuracyOptions::default()
@@ -43,9 +43,9 @@ fn task_b_meets_the_accuracy_requirement_with_the_defaults() {
 #[test]
 fn bad_task_and_options_are_refused() {
     let scenarios = Path::new(env!("CARGO_MANIFEST_DIR")).join("../sim/scenarios");
-    let err = amcl_accuracy::task_scenario(&scenarios, "z").unwrap_err();
+    let err = table::task_scenario(&scenarios, "z").unwrap_err();
     assert!(err.to_string().contains("tasks = z"), "{err}");
-    let path = amcl_accuracy::task_scenario(&scenarios, "a").unwrap();
+    let path = table::task_scenario(&scenarios, "a").unwrap();
     let options = AccuracyOptions {
         run: TableOptions {
             stuck_timeout_s: 0.0,

@@ -11,8 +11,8 @@ pub mod report;
 pub mod run;
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex, PoisonError};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Mutex, PoisonError};
 
 use planning::IntentionConfig;
 use protocol::ControllerKind;
@@ -221,7 +221,7 @@ pub fn run_all(
     let next = AtomicUsize::new(0);
     let results: Mutex<Vec<Option<(RunResult, RunTrace)>>> = Mutex::new(vec![None; runs.len()]);
     let first_error: Mutex<Option<TableError>> = Mutex::new(None);
-    let failed = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let failed = AtomicBool::new(false);
     std::thread::scope(|s| {
         for _ in 0..jobs.clamp(1, runs.len().max(1)) {
             s.spawn(|| loop {
