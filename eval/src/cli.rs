@@ -8,7 +8,7 @@
 //! [--seeds N] [--models DIR] [--jobs N] --out DIR`: the paper's Table 1 and Figure 5 in
 //! closed loop (see [`crate::table`]).
 //!
-//! `eval record [--scenario FILE]... [--samples N] [--noise P] [--noise-peak-radps W]
+//! `eval record [--scenario FILE]... [--samples N] [--noise P] [--noise-peak-radps W] [--policy MODEL --beta B]
 //! [--seed S] [--jobs N] [--image-px PX] [--every K] [--episode-s S] --out DIR`: the expert's demonstrations on the
 //! training scenarios as an imitation-learning dataset (see [`crate::record`]).
 
@@ -135,9 +135,9 @@ pub struct RecordArgs {
     /// Probability that an episode carries steering noise (labels stay the expert's).
     #[arg(long, default_value_t = 0.2)]
     noise: f64,
-    /// Largest turn-rate offset of a noise pulse in rad/s (the expert corrects offsets up to
-    /// about 0.25 rad/s; larger ones drag its labels along).
-    #[arg(long, default_value_t = 0.2)]
+    /// Largest turn-rate offset of a noise pulse in rad/s (the expert's command filter ignores
+    /// pushes up to this size, so its labels correct them).
+    #[arg(long, default_value_t = 0.4)]
     noise_peak_radps: f64,
     /// Seed of the episodes (starts, goals, worlds, noise).
     #[arg(long, default_value_t = 0)]
@@ -157,6 +157,13 @@ pub struct RecordArgs {
     /// Samples per shard at most.
     #[arg(long, default_value_t = 5000)]
     shard_samples: usize,
+    /// A DAgger round: this trained model (ONNX with card) drives, mixed with the expert by
+    /// --beta, and the expert labels every state visited.
+    #[arg(long)]
+    policy: Option<PathBuf>,
+    /// Probability that the expert's command is executed in a cycle of a DAgger round.
+    #[arg(long, requires = "policy", default_value_t = 0.5)]
+    beta: f64,
     /// Agent configuration TOML (its [amcl], [limits] and [safety] tables).
     #[arg(long)]
     config: Option<PathBuf>,
@@ -189,6 +196,11 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
         every: args.every,
         episode_s: args.episode_s,
         shard_samples: args.shard_samples,
+        policy: args
+            .policy
+            .as_deref()
+            .map(|model| crate::record::Policy::load(model, args.beta))
+            .transpose()?,
         run: TableOptions {
             agent: read_agent_config(args.config.as_deref())?,
             ..TableOptions::default()

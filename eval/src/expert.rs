@@ -210,6 +210,13 @@ pub struct ExpertConfig {
     pub detour_extra_m: f64,
     /// Least time between two detour searches.
     pub replan_period_s: f64,
+    /// The command filter restarts from the measured motion when the robot's speed differs
+    /// from the last command by more than this (a carry, a safety stop, another controller).
+    pub motion_resync_mps: f64,
+    /// The same for the turn rate. The recorder raises it above its steering-noise peak: a
+    /// push the expert did not command must not become its command, or the label would follow
+    /// the push instead of correcting it.
+    pub motion_resync_radps: f64,
 }
 
 impl Default for ExpertConfig {
@@ -239,6 +246,8 @@ impl Default for ExpertConfig {
             detour_max_ratio: 3.0,
             detour_extra_m: 6.0,
             replan_period_s: 1.0,
+            motion_resync_mps: 0.08,
+            motion_resync_radps: 0.25,
         }
     }
 }
@@ -267,6 +276,8 @@ impl ExpertConfig {
             ("block_scan_m", self.block_scan_m),
             ("detour_max_ratio", self.detour_max_ratio),
             ("replan_period_s", self.replan_period_s),
+            ("motion_resync_mps", self.motion_resync_mps),
+            ("motion_resync_radps", self.motion_resync_radps),
         ];
         for (field, v) in positive {
             if !(v.is_finite() && v > 0.0) {
@@ -935,8 +946,8 @@ impl Expert {
             let (s, c) = last.yaw_rad.sin_cos();
             let v = (dx * c + dy * s) / dt;
             let w = normalize_angle(pose.yaw_rad - last.yaw_rad) / dt;
-            let off_v = (v - self.motion.v_mps).abs() > 0.08;
-            let off_w = (w - self.motion.omega_radps).abs() > 0.25;
+            let off_v = (v - self.motion.v_mps).abs() > self.config.motion_resync_mps;
+            let off_w = (w - self.motion.omega_radps).abs() > self.config.motion_resync_radps;
             if off_v || off_w {
                 // A jump (a carry, or cycles without this controller) shows in odometry as
                 // well; trust the measured motion only when odometry roughly agrees.

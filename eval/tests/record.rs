@@ -175,7 +175,7 @@ fn a_short_recording_has_the_documented_files_and_values() {
     };
     let (left, right) = (mean_label_w(true), mean_label_w(false));
     assert!(
-        left < right,
+        left < 0.0 && right > 0.0,
         "label ω {left} when pushed left, {right} when pushed right"
     );
 
@@ -305,4 +305,51 @@ fn the_python_reader_reads_a_recording() {
         "{stdout}"
     );
     assert!(stdout.contains("per DLM:"), "{stdout}");
+}
+
+/// A DAgger round: a network (the agent's untrained fixture, through the real ONNX Runtime)
+/// drives with β = 0.25 and the expert labels. The learner's commands are executed in about
+/// three cycles of four, the labels are the expert's (they differ from what was executed), and
+/// the model is part of the dataset id.
+#[test]
+fn a_dagger_round_lets_the_learner_drive_and_the_expert_label() {
+    let model = test_support::repo_root().join("models/fixtures/dlm.onnx");
+    let mut o = options(0.0, 2);
+    o.samples = 120;
+    o.policy = Some(eval::record::Policy::load(&model, 0.25).unwrap());
+    assert_eq!(
+        o.policy.as_ref().unwrap().kind,
+        protocol::ControllerKind::Dlm
+    );
+    let out = tempfile::tempdir().unwrap();
+    let summary = record(&o, out.path(), &|_| {}).unwrap();
+    assert_eq!(summary.samples, 120);
+    let (index, fields) = read_all(out.path());
+    assert_eq!(index["policy"]["kind"], "dlm");
+    assert_eq!(index["policy"]["beta"], 0.25);
+    let learner = &fields["learner"];
+    #[allow(clippy::cast_precision_loss)]
+    let share = learner.iter().filter(|&&l| l == 1).count() as f64 / learner.len() as f64;
+    assert!((0.55..0.95).contains(&share), "learner drove {share}");
+    let (label, executed) = (f32s(&fields["label"]), f32s(&fields["executed"]));
+    assert!(
+        label
+            .chunks(2)
+            .zip(executed.chunks(2))
+            .zip(learner)
+            .filter(|((l, e), &who)| who == 1 && (l[0] - e[0]).abs() + (l[1] - e[1]).abs() > 0.05)
+            .count()
+            > 10,
+        "the labels are the executed commands"
+    );
+    // Another β is another dataset; β outside [0, 1] is refused.
+    o.policy = Some(eval::record::Policy::load(&model, 0.5).unwrap());
+    assert_ne!(o.dataset_id().unwrap(), summary.dataset_id);
+    let err = eval::record::Policy::load(&model, 1.5).unwrap_err();
+    assert!(err.to_string().contains("1.5"), "{err}");
+    // The expert-only recording has no learner samples.
+    o.policy = None;
+    let plain = tempfile::tempdir().unwrap();
+    record(&o, plain.path(), &|_| {}).unwrap();
+    assert!(read_all(plain.path()).1["learner"].iter().all(|&l| l == 0));
 }

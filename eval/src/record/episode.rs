@@ -6,15 +6,23 @@
 //! network's output will go through when it drives); the perturbation is added only to the
 //! executed command, after the decision, so a perturbed state carries the expert's
 //! correction as its label.
+//!
+//! In a DAgger round ([`super::dagger`]) the supervisor runs the β-mixture of the expert and a
+//! learner; the label is then what the expert said in that cycle (while the supervisor drives;
+//! its own stops stay stop labels), whoever's command was executed.
 
-use protocol::{Dlm, ImageEncoding};
+use std::sync::PoisonError;
+
+use protocol::{AgentState, Dlm, ImageEncoding};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use robot_agent::controllers::Control;
+use robot_agent::controllers::{Control, Controller};
 use robot_agent::Limits;
 use sim::Command;
 
-use super::image::resize_rgb8;
+use robot_agent::controllers::intention_net::preprocess::resize_area_rgb8;
+
+use super::dagger::{LabelCell, Mixed};
 use crate::table::run::{Cycle, CycleObserver, CycleOutcome};
 use crate::table::TableError;
 
@@ -37,6 +45,8 @@ pub struct Sample {
     pub pose_amcl: [f32; 3],
     /// Simulated seconds since the episode started.
     pub t_s: f32,
+    /// The learner's command was executed (DAgger), not the expert's.
+    pub learner_drove: bool,
 }
 
 /// Steering-noise schedule of a perturbed episode: a triangular pulse of turn-rate offset
@@ -98,6 +108,15 @@ pub struct Recorder<'a> {
     lpe: Vec<u8>,
     pub samples: Vec<Sample>,
     progress: &'a (dyn Fn(u64) + Sync),
+    dagger: Option<Dagger>,
+}
+
+/// A DAgger episode's learner, until the run asks for the controller, and the mixture's draws.
+struct Dagger {
+    learner: Option<Box<dyn Controller>>,
+    beta: f64,
+    seed: u64,
+    label: LabelCell,
 }
 
 impl<'a> Recorder<'a> {
@@ -123,7 +142,21 @@ impl<'a> Recorder<'a> {
             lpe: vec![0; image_px * image_px * 3],
             samples: Vec::new(),
             progress,
+            dagger: None,
         }
+    }
+
+    /// Makes this a DAgger episode: `learner` drives with probability 1 − `beta` per cycle
+    /// (drawn with `seed`) and the expert labels.
+    #[must_use]
+    pub fn with_learner(mut self, learner: Box<dyn Controller>, beta: f64, seed: u64) -> Self {
+        self.dagger = Some(Dagger {
+            learner: Some(learner),
+            beta,
+            seed,
+            label: LabelCell::default(),
+        });
+        self
     }
 
     fn shrink(&self, image: &protocol::Image, what: &'static str) -> Result<Vec<u8>, TableError> {
@@ -133,7 +166,7 @@ impl<'a> Recorder<'a> {
                 reason: format!("expected raw RGB8, got {:?}", image.encoding),
             });
         }
-        Ok(resize_rgb8(
+        Ok(resize_area_rgb8(
             &image.data,
             image.width_px as usize,
             image.height_px as usize,
@@ -158,6 +191,30 @@ impl CycleObserver for Recorder<'_> {
         true
     }
 
+    fn reads_camera(&self) -> bool {
+        self.dagger.is_some()
+    }
+
+    fn controller(
+        &mut self,
+        expert: Box<dyn Controller>,
+    ) -> Result<Box<dyn Controller>, TableError> {
+        let Some(d) = self.dagger.as_mut() else {
+            return Ok(expert);
+        };
+        let learner = d.learner.take().ok_or(TableError::Setup {
+            what: "learner",
+            reason: "one recorder serves one run".into(),
+        })?;
+        Ok(Box::new(Mixed::new(
+            expert,
+            learner,
+            d.beta,
+            d.seed,
+            d.label.clone(),
+        )))
+    }
+
     fn on_cycle(&mut self, cycle: Cycle<'_>) -> Result<CycleOutcome, TableError> {
         if let Some(intention) = cycle.intention {
             self.dlm = Some(intention.dlm);
@@ -167,6 +224,15 @@ impl CycleObserver for Recorder<'_> {
             };
         }
         let d = cycle.decision;
+        let decided = Control::from_physical(d.cmd_v_mps, d.cmd_omega_radps, &self.limits);
+        let (label, learner_drove) = match &self.dagger {
+            Some(dagger) if d.state == AgentState::Driving => dagger
+                .label
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .map_or((decided, false), |l| (l.expert, l.learner_drove)),
+            _ => (decided, false),
+        };
         let offset_radps = self
             .noise
             .as_mut()
@@ -191,11 +257,7 @@ impl CycleObserver for Recorder<'_> {
                 lpe: self.lpe.clone(),
                 // Dlm::index is 0..4.
                 dlm: dlm.index() as u8,
-                label: control_f32(Control::from_physical(
-                    d.cmd_v_mps,
-                    d.cmd_omega_radps,
-                    &self.limits,
-                )),
+                label: control_f32(label),
                 executed: control_f32(Control::from_physical(
                     cmd.v_mps,
                     cmd.omega_radps,
@@ -204,6 +266,7 @@ impl CycleObserver for Recorder<'_> {
                 pose_true: pose_f32(cycle.truth_pose),
                 pose_amcl: cycle.estimate_pose.map_or(nan, pose_f32),
                 t_s: cycle.t_s as f32,
+                learner_drove,
             });
             (self.progress)(1);
         }

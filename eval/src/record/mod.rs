@@ -13,8 +13,8 @@
 //! nothing but the seed and its number, so a recording is the same file for file for any
 //! number of jobs. Samples go to shards of at most `shard_samples` ([`writer`]).
 
+pub mod dagger;
 pub mod episode;
-pub mod image;
 pub mod npy;
 pub mod writer;
 
@@ -32,6 +32,7 @@ use sim::{Scenario, SimConfig, World};
 use crate::table::judge::GoalDistance;
 use crate::table::run::{run_with, Prepared};
 use crate::table::{TableError, TableOptions};
+pub use dagger::Policy;
 use episode::{Recorder, Sample};
 use writer::ShardWriter;
 
@@ -66,11 +67,10 @@ pub struct RecordOptions {
     pub samples: usize,
     /// Probability that an episode carries steering noise.
     pub noise: f64,
-    /// Largest turn-rate offset of a noise pulse. Kept below the expert's resynchronisation
-    /// threshold (`Expert::sync_motion` adopts the measured motion as its own command state
-    /// when it differs from its command by more than 0.25 rad/s): above it the expert's
-    /// command starts from the perturbed motion and its label follows the perturbation
-    /// instead of correcting it.
+    /// Largest turn-rate offset of a noise pulse. In a noisy episode the expert's
+    /// resynchronisation threshold (`ExpertConfig::motion_resync_radps`: it adopts the
+    /// measured motion as its own command state when the two differ by more) is raised above
+    /// this peak, so the push never becomes the expert's command and its label corrects it.
     pub noise_peak_radps: f64,
     pub seed: u64,
     /// Episodes run in parallel.
@@ -83,6 +83,9 @@ pub struct RecordOptions {
     pub episode_s: f64,
     /// Samples per shard at most.
     pub shard_samples: usize,
+    /// A DAgger round: the learner that drives (mixed with the expert by its β); `None`: the
+    /// expert drives.
+    pub policy: Option<Policy>,
     /// Shared run settings (the expert's and the agent's configuration, the cycle).
     pub run: TableOptions,
     /// The command line, for `index.json` (not part of the dataset id).
@@ -95,13 +98,14 @@ impl Default for RecordOptions {
             scenarios: Vec::new(),
             samples: 100_000,
             noise: 0.2,
-            noise_peak_radps: 0.2,
+            noise_peak_radps: 0.4,
             seed: 0,
             jobs: 1,
             image_px: 96,
             every: 1,
             episode_s: 120.0,
             shard_samples: 5000,
+            policy: None,
             run: TableOptions::default(),
             command: String::new(),
         }
@@ -252,6 +256,16 @@ impl RecordOptions {
             })?;
             h.update(Sha256::digest(&bytes));
         }
+        if let Some(p) = &self.policy {
+            let bytes = std::fs::read(&p.model).map_err(|e| {
+                RecordError::Run(TableError::Setup {
+                    what: "policy",
+                    reason: format!("{}: {e}", p.model.display()),
+                })
+            })?;
+            h.update(format!("policy {:?} beta {:?}\n", p.kind, p.beta).as_bytes());
+            h.update(Sha256::digest(&bytes));
+        }
         Ok(hex::encode(&h.finalize()[..8]))
     }
 }
@@ -393,6 +407,9 @@ fn run_episode(
     };
     let mut run = options.run.clone();
     run.time_limit_s = Some(options.episode_s);
+    if noisy {
+        run.expert.motion_resync_radps += options.noise_peak_radps;
+    }
     let mut recorder = Recorder::new(
         options.image_px,
         options.every,
@@ -401,6 +418,10 @@ fn run_episode(
         noisy.then(|| (mix(seed ^ 0x0015_E000), options.noise_peak_radps)),
         progress,
     );
+    if let Some(policy) = &options.policy {
+        let learner = policy.learner(&options.run.agent)?;
+        recorder = recorder.with_learner(learner, policy.beta, mix(seed ^ 0x00DA_66E5));
+    }
     let mut simulated_s = 0.0;
     match run_with(
         &prepared,
@@ -566,6 +587,11 @@ fn index_header(options: &RecordOptions, dataset_id: &str, loaded: &[Loaded]) ->
         "episode_s": options.episode_s,
         "max_speed_mps": options.run.agent.limits.max_speed_mps,
         "max_turn_radps": options.run.agent.limits.max_turn_radps,
+        "policy": options.policy.as_ref().map(|p| serde_json::json!({
+            "model": p.model.display().to_string(),
+            "kind": p.kind,
+            "beta": p.beta,
+        })),
         "dlm": ["turn_left", "turn_right", "go_forward", "stop"],
         "scenarios": loaded.iter().enumerate().map(|(i, l)| serde_json::json!({
             "index": i,

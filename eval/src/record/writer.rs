@@ -54,6 +54,7 @@ impl ShardWriter {
                 field("scenario", Dtype::U32, &[]),
                 field("episode", Dtype::U32, &[]),
                 field("noisy", Dtype::U8, &[]),
+                field("learner", Dtype::U8, &[]),
                 field("t_s", Dtype::F32, &[]),
             ],
             in_shard: 0,
@@ -97,6 +98,7 @@ impl ShardWriter {
                 "scenario" => npy::push_u32(&mut f.data, &[scenario]),
                 "episode" => npy::push_u32(&mut f.data, &[episode]),
                 "noisy" => f.data.push(u8::from(noisy)),
+                "learner" => f.data.push(u8::from(s.learner_drove)),
                 _ => npy::push_f32(&mut f.data, &[s.t_s]),
             }
         }

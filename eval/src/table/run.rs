@@ -211,6 +211,23 @@ pub trait CycleObserver {
         false
     }
 
+    /// Whether the supervisor gets the camera even for a method that does not read it.
+    fn reads_camera(&self) -> bool {
+        false
+    }
+
+    /// The controller the supervisor runs, given the method's (DAgger wraps the expert with
+    /// the learner that drives).
+    ///
+    /// # Errors
+    /// Any [`TableError`]; the run is not set up.
+    fn controller(
+        &mut self,
+        method_controller: Box<dyn Controller>,
+    ) -> Result<Box<dyn Controller>, TableError> {
+        Ok(method_controller)
+    }
+
     /// Called once per cycle after the supervisor's decision (not on a cycle that ends in an
     /// intervention or with the last goal reached).
     ///
@@ -250,6 +267,7 @@ pub fn run_with(
     mut observer: Option<&mut dyn CycleObserver>,
 ) -> Result<(RunResult, RunTrace), TableError> {
     let render_lpe = method.reads_lpe() || observer.as_ref().is_some_and(|o| o.render_lpe());
+    let reads_camera = method.reads_camera() || observer.as_ref().is_some_and(|o| o.reads_camera());
     let started = Instant::now();
     let mut scenario = prepared.scenario.clone();
     scenario.seed ^= seed;
@@ -288,6 +306,10 @@ pub fn run_with(
             method,
             reason: e.to_string(),
         })?
+    };
+    let controller = match observer.as_deref_mut() {
+        Some(o) => o.controller(controller)?,
+        None => controller,
     };
     let map = MapRef {
         name: MapName::new("plan").map_err(|e| setup("map name")(e.to_string()))?,
@@ -482,7 +504,7 @@ pub fn run_with(
                 tracing::warn!(scenario = %name, "intention refused: {reason}");
             }
         }
-        if method.reads_camera() {
+        if reads_camera {
             let frame = world
                 .camera_frame(0)
                 .map_err(|e| setup("camera")(e.to_string()))?;

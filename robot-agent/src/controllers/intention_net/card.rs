@@ -15,6 +15,7 @@
 //! | `dataset_id` | which demonstrations it was trained on |
 //! | `validation_loss` | final validation loss, finite and ≥ 0 |
 //! | `lpe_rendering` | `lpe` models only: JSON of the planner's LPE rendering parameters |
+//! | `lpe_image_px` | `lpe` models only, optional: the `lpe` input size (square) when the network takes the rendering scaled down (area average); absent = the rendering's `size_px` |
 //!
 //! Unknown keys are ignored on purpose: exporters (PyTorch, onnx tools) add their own.
 
@@ -114,6 +115,8 @@ pub struct ModelCard {
     pub validation_loss: f64,
     /// Present exactly for `lpe` models.
     pub lpe_rendering: Option<LpeRendering>,
+    /// `lpe` models only: the LPE input size when it differs from the rendering's.
+    pub lpe_image_px: Option<u32>,
 }
 
 /// A card that is missing a key or has a value that makes no sense.
@@ -332,6 +335,19 @@ impl ModelCard {
             }
             (_, None) => None,
         };
+        let lpe_image_px = match (kind, meta.get("lpe_image_px")) {
+            (ModelKind::Lpe, Some(_)) => {
+                Some(positive_u32(meta, "lpe_image_px", "LPE input size")?)
+            }
+            (_, Some(raw)) => {
+                return Err(invalid(
+                    "lpe_image_px",
+                    raw,
+                    format!("only lpe models have one, this card says kind = {kind}"),
+                ))
+            }
+            (_, None) => None,
+        };
         let validation_loss = finite_f64(meta, "validation_loss", "the final validation loss")?;
         if validation_loss < 0.0 {
             return Err(invalid(
@@ -354,7 +370,17 @@ impl ModelCard {
             dataset_id: non_empty(meta, "dataset_id", "the training dataset")?,
             validation_loss,
             lpe_rendering,
+            lpe_image_px,
         })
+    }
+
+    /// The side of the square `lpe` input: `lpe_image_px`, else the rendering's size; 0 for a
+    /// model without an LPE input.
+    #[must_use]
+    pub fn lpe_input_px(&self) -> u32 {
+        self.lpe_image_px
+            .or_else(|| self.lpe_rendering.as_ref().map(|r| r.size_px))
+            .unwrap_or(0)
     }
 
     /// The metadata that [`ModelCard::from_metadata`] reads back; what an exporter writes.
@@ -378,6 +404,9 @@ impl ModelCard {
             if let Ok(json) = serde_json::to_string(r) {
                 m.insert("lpe_rendering".into(), json);
             }
+        }
+        if let Some(px) = self.lpe_image_px {
+            m.insert("lpe_image_px".into(), px.to_string());
         }
         m
     }
@@ -538,8 +567,25 @@ mod tests {
         );
         meta.insert("lpe_rendering".into(), rendering.replace("168", "400"));
         assert!(ModelCard::from_metadata(&meta).is_err());
+        assert_eq!(
+            card.lpe_input_px(),
+            224,
+            "absent lpe_image_px: the rendering's size"
+        );
+        meta.insert("lpe_rendering".into(), rendering.into());
+        meta.insert("lpe_image_px".into(), "96".into());
+        let card = ModelCard::from_metadata(&meta).unwrap();
+        assert_eq!(card.lpe_input_px(), 96);
+        assert_eq!(ModelCard::from_metadata(&card.to_metadata()).unwrap(), card);
+        meta.insert("lpe_image_px".into(), "0".into());
+        let err = ModelCard::from_metadata(&meta).unwrap_err();
+        assert!(err.to_string().contains("lpe_image_px"), "{err}");
         let mut meta = dlm_meta();
         meta.insert("lpe_rendering".into(), rendering.into());
+        let err = ModelCard::from_metadata(&meta).unwrap_err();
+        assert!(err.to_string().contains("kind = dlm"), "{err}");
+        let mut meta = dlm_meta();
+        meta.insert("lpe_image_px".into(), "96".into());
         let err = ModelCard::from_metadata(&meta).unwrap_err();
         assert!(err.to_string().contains("kind = dlm"), "{err}");
     }

@@ -140,28 +140,7 @@ impl IntentionNet {
         options: &IntentionNetOptions,
     ) -> Result<Self, IntentionNetError> {
         let shown = path.display().to_string();
-        // Reading the file first gives a plain "no such file" rather than an ONNX Runtime error.
-        let bytes = std::fs::read(path).map_err(|e| IntentionNetError::Read {
-            path: shown.clone(),
-            reason: e.to_string(),
-        })?;
-        let environment = runtime::environment()?;
-        let session_err = |reason: String| IntentionNetError::Session {
-            path: shown.clone(),
-            reason,
-        };
-        let session = Session::builder(environment)
-            .map_err(|e| session_err(e.to_string()))?
-            .with_intra_threads(options.intra_threads.max(1))
-            .map_err(|e| session_err(e.to_string()))?
-            .commit_from_memory(&bytes)
-            .map_err(|e| session_err(e.to_string()))?;
-        let metadata = read_metadata(&session).map_err(session_err)?;
-        let card =
-            ModelCard::from_metadata(&metadata).map_err(|source| IntentionNetError::Card {
-                path: shown.clone(),
-                source,
-            })?;
+        let (session, card) = open(path, options)?;
         card.check(expect)
             .map_err(|source| IntentionNetError::Mismatch {
                 path: shown.clone(),
@@ -172,10 +151,7 @@ impl IntentionNet {
             reason,
         })?;
         let (w, h) = (card.image_width_px as usize, card.image_height_px as usize);
-        let lpe_px = card
-            .lpe_rendering
-            .as_ref()
-            .map_or(0, |r| r.size_px as usize);
+        let lpe_px = card.lpe_input_px() as usize;
         Ok(Self {
             path: path.to_path_buf(),
             camera: Array4::zeros((1, 3, h, w)),
@@ -274,7 +250,7 @@ impl Controller for IntentionNet {
                         input: "intention.lpe",
                     },
                 )?;
-                let size = card.lpe_rendering.as_ref().map_or(0, |r| r.size_px);
+                let size = card.lpe_input_px();
                 preprocess::image_to_chw(
                     lpe,
                     size,
@@ -292,6 +268,45 @@ impl Controller for IntentionNet {
         }
         self.run()
     }
+}
+
+/// Opens `path` in ONNX Runtime and reads its card (not yet checked against anything).
+fn open(
+    path: &Path,
+    options: &IntentionNetOptions,
+) -> Result<(Session, ModelCard), IntentionNetError> {
+    let shown = path.display().to_string();
+    // Reading the file first gives a plain "no such file" rather than an ONNX Runtime error.
+    let bytes = std::fs::read(path).map_err(|e| IntentionNetError::Read {
+        path: shown.clone(),
+        reason: e.to_string(),
+    })?;
+    let environment = runtime::environment()?;
+    let session_err = |reason: String| IntentionNetError::Session {
+        path: shown.clone(),
+        reason,
+    };
+    let session = Session::builder(environment)
+        .map_err(|e| session_err(e.to_string()))?
+        .with_intra_threads(options.intra_threads.max(1))
+        .map_err(|e| session_err(e.to_string()))?
+        .commit_from_memory(&bytes)
+        .map_err(|e| session_err(e.to_string()))?;
+    let metadata = read_metadata(&session).map_err(session_err)?;
+    let card = ModelCard::from_metadata(&metadata).map_err(|source| IntentionNetError::Card {
+        path: shown.clone(),
+        source,
+    })?;
+    Ok((session, card))
+}
+
+/// The card of the model at `path`, unchecked: what a tool needs to learn which kind of
+/// network a file holds before it configures a controller for it.
+///
+/// # Errors
+/// As [`IntentionNet::load`], short of the checks against a configuration and the contract.
+pub fn read_card(path: &Path) -> Result<ModelCard, IntentionNetError> {
+    open(path, &IntentionNetOptions::default()).map(|(_, card)| card)
 }
 
 fn read_metadata(session: &Session) -> Result<BTreeMap<String, String>, String> {
@@ -320,10 +335,7 @@ fn check_contract(session: &Session, card: &ModelCard) -> Result<(), String> {
             card.kind
         ));
     }
-    let lpe_px = card
-        .lpe_rendering
-        .as_ref()
-        .map_or(0, |r| i64::from(r.size_px));
+    let lpe_px = i64::from(card.lpe_input_px());
     let (h, w) = (
         i64::from(card.image_height_px),
         i64::from(card.image_width_px),
