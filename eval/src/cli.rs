@@ -90,6 +90,13 @@ pub struct TableArgs {
     /// Add every behaviour scenario (`behaviour_*.yaml` of the scenarios folder).
     #[arg(long)]
     behaviour: bool,
+    /// Add this many generated buildings (`sim gen-building`), seeds --generated-first-seed and
+    /// on: by default evaluation buildings, which no recording may use.
+    #[arg(long, default_value_t = 0)]
+    generated: u64,
+    /// First seed of the generated buildings (default: the start of the evaluation range).
+    #[arg(long, default_value_t = sim::procgen::EVALUATION_SEED_BASE)]
+    generated_first_seed: u64,
     /// Comma-separated methods: dlm, lpe, none, path-tracker, dynamic-window, expert (default:
     /// every method whose model, if it needs one, is in the models folder).
     #[arg(long, value_delimiter = ',')]
@@ -129,6 +136,13 @@ pub struct RecordArgs {
     /// folder). Evaluation and behaviour scenarios are refused.
     #[arg(long)]
     scenario: Vec<PathBuf>,
+    /// Also record on this many generated training buildings (`sim gen-building`), seeds
+    /// --generated-first-seed and on.
+    #[arg(long, default_value_t = 0)]
+    generated: u64,
+    /// First seed of the generated buildings; must stay below the evaluation range (1000000).
+    #[arg(long, default_value_t = 0)]
+    generated_first_seed: u64,
     /// Samples to record in all.
     #[arg(long, default_value_t = 100_000)]
     samples: usize,
@@ -185,6 +199,7 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
     };
     let options = crate::record::RecordOptions {
         scenarios,
+        generated: seed_range(args.generated_first_seed, args.generated)?,
         samples: args.samples,
         noise: args.noise,
         noise_peak_radps: args.noise_peak_radps,
@@ -245,6 +260,16 @@ fn read_agent_config(config: Option<&std::path::Path>) -> anyhow::Result<AgentCo
     }
 }
 
+/// `count` seeds from `first`.
+fn seed_range(first: u64, count: u64) -> anyhow::Result<Vec<u64>> {
+    let end = first.checked_add(count).ok_or_else(|| {
+        anyhow::anyhow!(
+            "invalid --generated-first-seed {first} with --generated {count}: overflows"
+        )
+    })?;
+    Ok((first..end).collect())
+}
+
 fn run_table(args: &TableArgs) -> anyhow::Result<()> {
     if args.seeds == 0 {
         anyhow::bail!("invalid --seeds 0: need at least one seed");
@@ -273,7 +298,9 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
     let mut paths: Vec<PathBuf> = Vec::new();
     let tasks: Vec<String> = match &args.tasks {
         Some(t) => t.clone(),
-        None if args.scenario.is_empty() => ["a", "b", "c", "d", "e"].map(String::from).to_vec(),
+        None if args.scenario.is_empty() && args.generated == 0 => {
+            ["a", "b", "c", "d", "e"].map(String::from).to_vec()
+        }
         None => Vec::new(),
     };
     if !tasks.is_empty() || args.behaviour {
@@ -312,7 +339,10 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
     let jobs = args.jobs.unwrap_or_else(|| {
         std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
     });
-    let prepared = table::prepare(&paths, &options)?;
+    let mut prepared = table::prepare(&paths, &options)?;
+    for seed in seed_range(args.generated_first_seed, args.generated)? {
+        prepared.push(table::prepare_generated(seed, &options)?);
+    }
     let runs = table::plan_runs(prepared.len(), &methods, &seeds);
     eprintln!(
         "{} scenarios × {} methods × {} seeds = {} runs on {jobs} jobs",

@@ -353,3 +353,38 @@ fn a_dagger_round_lets_the_learner_drive_and_the_expert_label() {
     record(&o, plain.path(), &|_| {}).unwrap();
     assert!(read_all(plain.path()).1["learner"].iter().all(|&l| l == 0));
 }
+
+/// Generated training buildings record like scenario files (named `generated/gen_…` in the
+/// index); a seed of the evaluation range is refused before anything is written.
+#[test]
+fn generated_buildings_record_and_evaluation_seeds_are_refused() {
+    let mut o = options(0.0, 2);
+    o.scenarios.clear();
+    o.generated = vec![5, 6];
+    o.samples = 150;
+    let out = tempfile::tempdir().unwrap();
+    let summary = record(&o, out.path(), &|_| {}).unwrap();
+    assert_eq!(summary.samples, 150);
+    let (index, fields) = read_all(out.path());
+    let names: Vec<&str> = index["scenarios"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["gen_000005", "gen_000006"]);
+    // Both buildings were driven (episodes alternate between them).
+    let scenario_ids: std::collections::BTreeSet<u8> =
+        fields["scenario"].chunks(4).map(|c| c[0]).collect();
+    assert_eq!(scenario_ids.len(), 2);
+    // Another generated building is another dataset.
+    o.generated = vec![5, 7];
+    assert_ne!(o.dataset_id().unwrap(), summary.dataset_id);
+
+    o.generated = vec![5, sim::procgen::EVALUATION_SEED_BASE + 3];
+    let refused = tempfile::tempdir().unwrap();
+    let err = record(&o, refused.path(), &|_| {}).unwrap_err();
+    assert!(matches!(err, RecordError::NotTraining { .. }), "{err}");
+    assert!(err.to_string().contains("1000003"), "{err}");
+    assert!(std::fs::read_dir(refused.path()).unwrap().next().is_none());
+}

@@ -1,5 +1,6 @@
 //! The `sim` command line: render one frame, draw a world top-down, run the Zenoh driver,
-//! benchmark, (re)generate the shipped maps and scenarios, print the scenario schema.
+//! benchmark, (re)generate the shipped maps and scenarios, generate procedural buildings, print
+//! the scenario schema.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -90,6 +91,17 @@ pub enum Cmd {
     },
     /// Regenerate the shipped floor plans and scenarios into a folder.
     GenMaps {
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Generate procedural buildings: for each seed S..S+N-1 the ROS map under `DIR/maps/`, the
+    /// scenario `DIR/<name>.yaml` and a top-down picture `DIR/<name>.png`. Seeds from 1000000
+    /// make evaluation buildings (`gen_eval_<seed>`), below it training ones (`gen_<seed>`).
+    GenBuilding {
+        #[arg(long)]
+        seed: u64,
+        #[arg(long, default_value_t = 1)]
+        count: u64,
         #[arg(long)]
         out: PathBuf,
     },
@@ -219,6 +231,13 @@ pub fn run(cli: Cli) -> Result<()> {
         Cmd::GenMaps { out } => {
             let files = crate::mapgen::generate(&out)?;
             println!("wrote {} files under {}", files.len(), out.display());
+            Ok(())
+        }
+        Cmd::GenBuilding { seed, count, out } => {
+            for written in crate::procgen::generate(&out, seed, count)? {
+                println!("{}", written.summary);
+            }
+            println!("wrote {count} buildings under {}", out.display());
             Ok(())
         }
         Cmd::Schema => {

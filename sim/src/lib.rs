@@ -5,6 +5,7 @@
 //! - [`world`]: the lock-step simulation ([`World::step`]) with collisions, LIDAR and odometry;
 //! - [`camera`]: the monocular camera renderer ([`World::render_camera`]);
 //! - [`mapgen`]: the generated floor plans and shipped scenarios;
+//! - [`procgen`]: procedural buildings from a seed (training and held-out evaluation buildings);
 //! - [`driver`]: the real-time Zenoh driver; [`roster`]: the robot roster `sim run` prints (JSON),
 //!   with its one parser; [`cli`]: the `sim` command line.
 
@@ -15,6 +16,7 @@ pub mod config;
 pub mod driver;
 pub mod geom;
 pub mod mapgen;
+pub mod procgen;
 pub mod raycast;
 pub mod roster;
 pub mod scenario;

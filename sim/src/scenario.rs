@@ -195,6 +195,19 @@ pub struct BoxSpec {
     pub color: Rgb,
 }
 
+impl BoxSpec {
+    /// The box as the world holds it.
+    pub fn shape(&self) -> crate::geom::Obb {
+        crate::geom::Obb::new(
+            self.x_m,
+            self.y_m,
+            self.size_x_m,
+            self.size_y_m,
+            self.yaw_rad,
+        )
+    }
+}
+
 fn default_glass_thickness() -> f64 {
     0.04
 }
@@ -220,6 +233,13 @@ pub struct GlassSpec {
     pub frame_color: Rgb,
     #[serde(default = "default_glass_tint")]
     pub tint: Rgb,
+}
+
+impl GlassSpec {
+    /// The pane as the world holds it.
+    pub fn shape(&self) -> crate::geom::Obb {
+        crate::geom::Obb::from_segment(self.x0_m, self.y0_m, self.x1_m, self.y1_m, self.thickness_m)
+    }
 }
 
 /// How a person walks their route.

@@ -300,7 +300,7 @@ impl World {
             .furniture
             .iter()
             .map(|b| Furniture {
-                shape: Obb::new(b.x_m, b.y_m, b.size_x_m, b.size_y_m, b.yaw_rad),
+                shape: b.shape(),
                 height_m: b.height_m,
                 color: b.color,
             })
@@ -309,7 +309,7 @@ impl World {
             .glass
             .iter()
             .map(|g| Glass {
-                shape: Obb::from_segment(g.x0_m, g.y0_m, g.x1_m, g.y1_m, g.thickness_m),
+                shape: g.shape(),
                 frame_color: g.frame_color,
                 tint: g.tint,
             })
@@ -805,28 +805,12 @@ impl World {
     /// The static ground truth as a grid: the plan's walls plus furniture and glass rasterized
     /// (people and robots excluded). For tests and the evaluation harness.
     pub fn ground_truth_grid(&self) -> OccupancyGrid {
-        let mut grid = self.plan.clone();
-        let res = grid.resolution_m();
         let shapes = self
             .furniture
             .iter()
             .map(|f| f.shape)
             .chain(self.glass.iter().map(|g| g.shape));
-        for s in shapes {
-            let r = s.bounding_radius() + res;
-            let (c0x, c0y) = grid.world_to_cell(s.cx - r, s.cy - r);
-            let (c1x, c1y) = grid.world_to_cell(s.cx + r, s.cy + r);
-            for cy in c0y.min(c1y)..=c0y.max(c1y) {
-                for cx in c0x.min(c1x)..=c0x.max(c1x) {
-                    let (x, y) = grid.cell_to_world(cx, cy);
-                    // A cell is blocked when any part of it touches the shape.
-                    if s.distance(x, y) <= 0.5 * res * std::f64::consts::SQRT_2 {
-                        grid.set(cx, cy, map_core::OCCUPIED);
-                    }
-                }
-            }
-        }
-        grid
+        rasterize_shapes(&self.plan, shapes)
     }
 
     /// Advances the camera sequence number of robot `index` and returns the header to use.
@@ -840,4 +824,29 @@ impl World {
                 h
             })
     }
+}
+
+/// `plan` with `shapes` rasterized as occupied: every cell any part of which touches a shape (what
+/// [`World::ground_truth_grid`] draws for furniture and glass).
+pub fn rasterize_shapes(
+    plan: &OccupancyGrid,
+    shapes: impl IntoIterator<Item = Obb>,
+) -> OccupancyGrid {
+    let mut grid = plan.clone();
+    let res = grid.resolution_m();
+    for s in shapes {
+        let r = s.bounding_radius() + res;
+        let (c0x, c0y) = grid.world_to_cell(s.cx - r, s.cy - r);
+        let (c1x, c1y) = grid.world_to_cell(s.cx + r, s.cy + r);
+        for cy in c0y.min(c1y)..=c0y.max(c1y) {
+            for cx in c0x.min(c1x)..=c0x.max(c1x) {
+                let (x, y) = grid.cell_to_world(cx, cy);
+                // A cell is blocked when any part of it touches the shape.
+                if s.distance(x, y) <= 0.5 * res * std::f64::consts::SQRT_2 {
+                    grid.set(cx, cy, map_core::OCCUPIED);
+                }
+            }
+        }
+    }
+    grid
 }

@@ -31,7 +31,7 @@ use sim::{Scenario, SimConfig, World};
 
 use crate::table::judge::GoalDistance;
 use crate::table::run::{run_with, Prepared};
-use crate::table::{TableError, TableOptions};
+use crate::table::{prepare_generated, TableError, TableOptions};
 pub use dagger::Policy;
 use episode::{Recorder, Sample};
 use writer::ShardWriter;
@@ -63,6 +63,8 @@ pub enum RecordError {
 pub struct RecordOptions {
     /// Training scenario files.
     pub scenarios: Vec<PathBuf>,
+    /// Seeds of generated training buildings (`sim::procgen`; below its evaluation range).
+    pub generated: Vec<u64>,
     /// Samples to store in all.
     pub samples: usize,
     /// Probability that an episode carries steering noise.
@@ -96,6 +98,7 @@ impl Default for RecordOptions {
     fn default() -> Self {
         Self {
             scenarios: Vec::new(),
+            generated: Vec::new(),
             samples: 100_000,
             noise: 0.2,
             noise_peak_radps: 0.4,
@@ -164,8 +167,22 @@ impl RecordOptions {
             value,
             reason: reason.into(),
         };
-        if self.scenarios.is_empty() {
-            return Err(invalid("scenarios", "[]".into(), "need at least one"));
+        if self.scenarios.is_empty() && self.generated.is_empty() {
+            return Err(invalid(
+                "scenarios",
+                "[]".into(),
+                "need at least one scenario file or generated building",
+            ));
+        }
+        if let Some(&seed) = self
+            .generated
+            .iter()
+            .find(|&&s| sim::procgen::role_of_seed(s) != Role::Training)
+        {
+            return Err(RecordError::NotTraining {
+                path: format!("generated building {seed}"),
+                role: "evaluation".into(),
+            });
         }
         if self.samples == 0 {
             return Err(invalid("samples", "0".into(), "need at least one"));
@@ -231,6 +248,17 @@ impl RecordOptions {
     /// # Errors
     /// [`RecordError::Scenario`] for an unreadable scenario file.
     pub fn dataset_id(&self) -> Result<String, RecordError> {
+        let generated = self
+            .generated
+            .iter()
+            .map(|&seed| prepare_generated(seed, &self.run))
+            .collect::<Result<Vec<_>, _>>()?;
+        self.dataset_id_with(&generated)
+    }
+
+    /// [`RecordOptions::dataset_id`] with the generated buildings already made: their
+    /// scenarios and plans are hashed, so a change of the generator is a new dataset.
+    fn dataset_id_with(&self, generated: &[Prepared]) -> Result<String, RecordError> {
         let mut h = Sha256::new();
         h.update(
             format!(
@@ -255,6 +283,10 @@ impl RecordOptions {
                 reason: e.to_string(),
             })?;
             h.update(Sha256::digest(&bytes));
+        }
+        for g in generated {
+            h.update(format!("generated {:?}\n", g.scenario).as_bytes());
+            h.update(Sha256::digest(g.plan.cells()));
         }
         if let Some(p) = &self.policy {
             let bytes = std::fs::read(&p.model).map_err(|e| {
@@ -465,12 +497,22 @@ pub fn record(
 ) -> Result<Summary, RecordError> {
     let started = Instant::now();
     options.validate()?;
-    let dataset_id = options.dataset_id()?;
-    let loaded: Vec<Loaded> = options
+    let generated = options
+        .generated
+        .iter()
+        .map(|&seed| prepare_generated(seed, &options.run))
+        .collect::<Result<Vec<_>, _>>()?;
+    let dataset_id = options.dataset_id_with(&generated)?;
+    let files = options
         .scenarios
         .iter()
-        .map(|path| {
-            let prepared = Prepared::load(path, &options.run)?;
+        .map(|path| Prepared::load(path, &options.run))
+        .collect::<Result<Vec<_>, _>>()?;
+    let loaded: Vec<Loaded> = files
+        .into_iter()
+        .chain(generated)
+        .map(|prepared| {
+            let path = prepared.path.clone();
             let world = World::new(
                 prepared.scenario.clone(),
                 prepared.plan.clone(),

@@ -197,6 +197,22 @@ pub fn prepare(paths: &[PathBuf], options: &TableOptions) -> Result<Vec<Prepared
     paths.iter().map(|p| Prepared::load(p, options)).collect()
 }
 
+/// The generated building of `seed` (`sim::procgen`: a random office, corridor network, hall
+/// or mixture with furniture, glass, people and looks), prepared like a scenario file and
+/// named `generated/<name>`. Seeds from [`sim::procgen::EVALUATION_SEED_BASE`] on are
+/// evaluation buildings, the ones below training buildings.
+///
+/// # Errors
+/// [`TableError::Scenario`] naming the seed when no building can be made of it.
+pub fn prepare_generated(seed: u64, options: &TableOptions) -> Result<Prepared, TableError> {
+    let building = sim::procgen::building(seed).map_err(|e| TableError::Scenario {
+        path: format!("generated building {seed}"),
+        reason: e.to_string(),
+    })?;
+    let label = PathBuf::from("generated").join(&building.scenario.name);
+    Prepared::new(&label, building.scenario, building.grid, options)
+}
+
 /// What the workers report while a table runs.
 #[derive(Debug, Clone, Copy)]
 pub enum Progress<'a> {

@@ -60,9 +60,27 @@ impl Prepared {
         let plan = map_core::load_ros_map(&plan_path, &map_core::ImportLimits::default())
             .map_err(|e| scenario_err(&plan_path, e.to_string()))?
             .grid;
+        Self::new(path, scenario, plan, options)
+    }
+
+    /// Builds what every run of a scenario shares from the scenario and its floor plan in
+    /// memory (e.g. a generated building); `path` only names it.
+    ///
+    /// # Errors
+    /// [`TableError::Scenario`] naming `path` when the plan cannot be planned on.
+    pub fn new(
+        path: &Path,
+        scenario: Scenario,
+        plan: OccupancyGrid,
+        options: &TableOptions,
+    ) -> Result<Self, TableError> {
         let planning = Arc::new(
-            PlanningMap::new(plan.clone(), &options.intention.planner)
-                .map_err(|e| scenario_err(&plan_path, e.to_string()))?,
+            PlanningMap::new(plan.clone(), &options.intention.planner).map_err(|e| {
+                TableError::Scenario {
+                    path: path.display().to_string(),
+                    reason: e.to_string(),
+                }
+            })?,
         );
         let goal_distance = scenario
             .goals

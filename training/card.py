@@ -1,0 +1,125 @@
+"""The model card: string key -> string value, stored as the ONNX model's metadata_props.
+
+The robot agent reads it (robot-agent/src/controllers/intention_net/card.rs) and refuses a
+model whose card is incomplete or does not match its configuration. Keys it reads:
+
+    card_version "1", kind dlm|lpe|none, backbone (free text), image_width_px, image_height_px
+    (the camera input size), norm_mean, norm_std ("r,g,b"), max_speed_mps, max_turn_radps,
+    dataset_id, validation_loss; lpe models also lpe_rendering (JSON of the planner's LPE
+    parameters, every key) and lpe_image_px (the lpe input size; absent = the rendering's size_px).
+
+Everything else the trainer writes (recipe, deviations, per-intention errors, ...) is for people
+and ignored by the agent. `check` applies the agent's rules in Python so a bad card fails at
+export time, not when a robot loads it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+CARD_VERSION = "1"
+REQUIRED = (
+    "card_version",
+    "kind",
+    "backbone",
+    "image_width_px",
+    "image_height_px",
+    "norm_mean",
+    "norm_std",
+    "max_speed_mps",
+    "max_turn_radps",
+    "dataset_id",
+    "validation_loss",
+)
+LPE_RENDERING_KEYS = (
+    "size_px",
+    "metres_per_px",
+    "robot_px",
+    "travelled_width_px",
+    "ahead_width_px",
+    "free_rgb",
+    "occupied_rgb",
+    "unknown_rgb",
+    "travelled_rgb",
+    "ahead_rgb",
+)
+
+
+def triple(values) -> str:
+    return ",".join(repr(float(v)) for v in values)
+
+
+def make(meta: dict, validation_loss: float, extras: dict | None = None) -> dict[str, str]:
+    """The card from a checkpoint's `card_inputs` (see train.py) and the validation loss.
+    Values become strings; dicts and lists become compact JSON."""
+    kind = meta["kind"]
+    card = {
+        "card_version": CARD_VERSION,
+        "kind": kind,
+        "backbone": meta["backbone_text"],
+        "image_width_px": str(int(meta["camera_px"])),
+        "image_height_px": str(int(meta["camera_px"])),
+        "norm_mean": triple(meta["norm_mean"]),
+        "norm_std": triple(meta["norm_std"]),
+        "max_speed_mps": repr(float(meta["max_speed_mps"])),
+        "max_turn_radps": repr(float(meta["max_turn_radps"])),
+        "dataset_id": str(meta["dataset_id"]),
+        "validation_loss": repr(float(validation_loss)),
+    }
+    if kind == "lpe":
+        card["lpe_rendering"] = json.dumps(meta["lpe_rendering"], sort_keys=True, separators=(",", ":"))
+        card["lpe_image_px"] = str(int(meta["lpe_px"]))
+    for k, v in (extras or {}).items():
+        card[k] = v if isinstance(v, str) else json.dumps(v, sort_keys=True, separators=(",", ":"))
+    return card
+
+
+def check(card: dict[str, str]) -> None:
+    """Raises ValueError naming the first key the agent would refuse (mirrors card.rs)."""
+    for key in REQUIRED:
+        if key not in card or not str(card[key]).strip():
+            raise ValueError(f"model card: key {key!r} is missing or empty")
+    if card["card_version"] != CARD_VERSION:
+        raise ValueError(f"model card: card_version {card['card_version']!r}, the agent reads {CARD_VERSION}")
+    kind = card["kind"]
+    if kind not in ("dlm", "lpe", "none"):
+        raise ValueError(f"model card: kind {kind!r}")
+    for key in ("image_width_px", "image_height_px"):
+        if not 1 <= int(card[key]) <= 8192:
+            raise ValueError(f"model card: {key} = {card[key]}")
+    for key, positive in (("norm_mean", False), ("norm_std", True)):
+        parts = [float(p) for p in card[key].split(",")]
+        if len(parts) != 3 or not all(math.isfinite(p) and (p > 0 or not positive) for p in parts):
+            raise ValueError(f"model card: {key} = {card[key]!r}")
+    for key in ("max_speed_mps", "max_turn_radps"):
+        v = float(card[key])
+        if not (math.isfinite(v) and v > 0):
+            raise ValueError(f"model card: {key} = {card[key]}")
+    loss = float(card["validation_loss"])
+    if not (math.isfinite(loss) and loss >= 0):
+        raise ValueError(f"model card: validation_loss = {card['validation_loss']}")
+    if kind == "lpe":
+        rendering = json.loads(card.get("lpe_rendering", "null") or "null")
+        if not isinstance(rendering, dict):
+            raise ValueError("model card: an lpe model needs lpe_rendering (JSON object)")
+        missing = [k for k in LPE_RENDERING_KEYS if k not in rendering]
+        if missing:
+            raise ValueError(f"model card: lpe_rendering lacks {missing}")
+        size = int(rendering["size_px"])
+        rx, ry = rendering["robot_px"]
+        if not (8 <= size <= 4096 and 0 <= rx < size and 0 <= ry < size):
+            raise ValueError(f"model card: lpe_rendering out of range: {rendering}")
+        if "lpe_image_px" in card and not 1 <= int(card["lpe_image_px"]) <= 8192:
+            raise ValueError(f"model card: lpe_image_px = {card['lpe_image_px']}")
+    else:
+        for key in ("lpe_rendering", "lpe_image_px"):
+            if key in card:
+                raise ValueError(f"model card: {key} on a {kind} model (the agent refuses it)")
+
+
+def lpe_input_px(card: dict[str, str]) -> int:
+    """The lpe input size the agent feeds: lpe_image_px, else the rendering's size_px."""
+    if "lpe_image_px" in card:
+        return int(card["lpe_image_px"])
+    return int(json.loads(card["lpe_rendering"])["size_px"])

@@ -1,0 +1,1 @@
+"""Tests of the training package (run from the repository root)."""
