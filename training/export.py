@@ -133,7 +133,36 @@ def check_contract(sess: ort.InferenceSession, card: dict[str, str]) -> None:
             raise SystemExit(f"export: `{name}` has shape {dims}, expected {expected} with a dynamic batch")
 
 
-def export_checkpoint(checkpoint: str | Path, out: str | Path, max_mb: float = MAX_MB, card_json: str | Path | None = None) -> dict:
+def closed_loop_summary(tables: list[str | Path], kind: str) -> str:
+    """The card's `closed_loop`: this network's rows of `eval table` results (table.json), per
+    scenario: successes/runs, interventions, collisions, time and smoothness (mean over seeds),
+    with the command that made each table."""
+    rows = []
+    for path in tables:
+        table = json.loads(Path(path).read_text())
+        for r in table["rows"]:
+            if r["method"] != kind:
+                continue
+            def mean(key, digits):
+                stat = r.get(key)
+                return None if stat is None else round(stat["mean"], digits)
+
+            rows.append({
+                "scenario": r["scenario"],
+                "success": f"{r['successes']}/{r['runs']}",
+                "interventions": mean("interventions", 2),
+                "collisions": mean("collisions", 2),
+                "collisions_person_glass": r["collisions_person"] + r["collisions_glass"],
+                "time_s": mean("time_s", 1),
+                "smoothness_mps3": mean("smoothness", 3),
+            })
+    if not rows:
+        raise SystemExit(f"--closed-loop: no rows for method {kind} in {', '.join(map(str, tables))}")
+    return json.dumps({"tables": [str(t) for t in tables], "rows": rows}, separators=(",", ":"))
+
+
+def export_checkpoint(checkpoint: str | Path, out: str | Path, max_mb: float = MAX_MB, card_json: str | Path | None = None,
+                      closed_loop: list[str | Path] | None = None) -> dict:
     """Exports, checks and saves; returns {card, max_abs_diff, size_mb, check_inputs}."""
     ckpt = load_checkpoint(checkpoint)
     config = ckpt["model_config"]
@@ -142,6 +171,8 @@ def export_checkpoint(checkpoint: str | Path, out: str | Path, max_mb: float = M
     net.load_state_dict(ckpt["state_dict"])
     net.eval()
     card = card_for(ckpt)
+    if closed_loop:
+        card["closed_loop"] = closed_loop_summary(closed_loop, kind)
     card_mod.check(card)
 
     feeds, what = check_inputs(ckpt)
@@ -200,11 +231,13 @@ def main(argv=None) -> int:
     p.add_argument("--checkpoint", required=True, help="checkpoint_best.pt (or any checkpoint) of training/train.py")
     p.add_argument("--out", required=True, help="the .onnx file to write")
     p.add_argument("--card-json", help="also write the card (and the check's result) as JSON here")
+    p.add_argument("--closed-loop", nargs="+", metavar="TABLE_JSON",
+                   help="eval table results (table.json) whose rows for this network go into the card's closed_loop")
     p.add_argument("--max-mb", type=float, default=MAX_MB, help="refuse a larger model (default %(default)s)")
     p.add_argument("--threads", type=int, default=2)
     args = p.parse_args(argv)
     torch.set_num_threads(args.threads)
-    export_checkpoint(args.checkpoint, args.out, args.max_mb, args.card_json)
+    export_checkpoint(args.checkpoint, args.out, args.max_mb, args.card_json, args.closed_loop)
     return 0
 
 
