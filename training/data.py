@@ -49,8 +49,8 @@ OMEGA_BINS = (0.1, 0.3, 0.6)
 # index.json does not state them.
 DEFAULT_MAX_SPEED_MPS = 0.7
 DEFAULT_MAX_TURN_RADPS = 1.2
-# The planner's default LPE rendering (planner-service / protocol LpeParams::default()), for
-# recordings whose index.json does not state the rendering.
+# The planner's default LPE rendering (protocol LpeParams::default()), only for recordings made
+# before `eval record` wrote the rendering into index.json (`lpe_rendering`).
 DEFAULT_LPE_RENDERING = {
     "size_px": 224,
     "metres_per_px": 0.05,

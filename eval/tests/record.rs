@@ -105,6 +105,11 @@ fn a_short_recording_has_the_documented_files_and_values() {
     assert_eq!(index["format"], "intention-fleet-demonstrations");
     assert_eq!(index["samples"], 300);
     assert_eq!(index["image_px"], 32);
+    // The LPE images' rendering, for the card of a model trained on them.
+    let rendering: protocol::LpeParams =
+        serde_json::from_value(index["lpe_rendering"].clone()).unwrap();
+    assert_eq!(rendering, protocol::LpeParams::default());
+    assert!(index["policy"].is_null());
     assert_eq!(index["dataset_id"], summary.dataset_id.as_str());
     assert_eq!(index["scenarios"][0]["name"], "train_lab");
     // 300 samples in shards of 128.

@@ -629,6 +629,8 @@ fn index_header(options: &RecordOptions, dataset_id: &str, loaded: &[Loaded]) ->
         "episode_s": options.episode_s,
         "max_speed_mps": options.run.agent.limits.max_speed_mps,
         "max_turn_radps": options.run.agent.limits.max_turn_radps,
+        // The rendering the LPE images were drawn with: a model trained on them records it.
+        "lpe_rendering": options.run.intention.lpe,
         "policy": options.policy.as_ref().map(|p| serde_json::json!({
             "model": p.model.display().to_string(),
             "kind": p.kind,
