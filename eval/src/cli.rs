@@ -149,6 +149,10 @@ pub struct RecordArgs {
     /// Probability that an episode carries steering noise (labels stay the expert's).
     #[arg(long, default_value_t = 0.2)]
     noise: f64,
+    /// Probability that an episode gets a scripted encounter on its first leg: a person
+    /// ahead, a person coming towards the robot or a shut glass door (paper §4.2).
+    #[arg(long, default_value_t = 0.0)]
+    encounters: f64,
     /// Largest turn-rate offset of a noise pulse in rad/s (the expert's command filter ignores
     /// pushes up to this size, so its labels correct them).
     #[arg(long, default_value_t = 0.4)]
@@ -202,6 +206,7 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
         generated: seed_range(args.generated_first_seed, args.generated)?,
         samples: args.samples,
         noise: args.noise,
+        encounters: args.encounters,
         noise_peak_radps: args.noise_peak_radps,
         seed: args.seed,
         jobs: args.jobs.unwrap_or_else(|| {
@@ -246,6 +251,9 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
         summary.simulated_s,
         summary.wall_s
     );
+    for (kind, episodes) in &summary.encounters {
+        println!("  {} episodes with a scripted {kind}", episodes.len());
+    }
     Ok(())
 }
 

@@ -14,10 +14,12 @@
 //! number of jobs. Samples go to shards of at most `shard_samples` ([`writer`]).
 
 pub mod dagger;
+pub mod encounter;
 pub mod episode;
 pub mod npy;
 pub mod writer;
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
@@ -69,6 +71,9 @@ pub struct RecordOptions {
     pub samples: usize,
     /// Probability that an episode carries steering noise.
     pub noise: f64,
+    /// Probability that an episode gets a scripted encounter on its first leg ([`encounter`]:
+    /// a person ahead, a person coming towards the robot, or a shut glass door).
+    pub encounters: f64,
     /// Largest turn-rate offset of a noise pulse. In a noisy episode the expert's
     /// resynchronisation threshold (`ExpertConfig::motion_resync_radps`: it adopts the
     /// measured motion as its own command state when the two differ by more) is raised above
@@ -101,6 +106,7 @@ impl Default for RecordOptions {
             generated: Vec::new(),
             samples: 100_000,
             noise: 0.2,
+            encounters: 0.0,
             noise_peak_radps: 0.4,
             seed: 0,
             jobs: 1,
@@ -123,6 +129,8 @@ pub struct Summary {
     /// Episodes that contributed samples.
     pub episodes: usize,
     pub noisy_episodes: usize,
+    /// The stored episodes that got each scripted encounter, by kind.
+    pub encounters: BTreeMap<&'static str, Vec<u32>>,
     pub shards: usize,
     /// Simulated seconds of all episodes run (including samples cut off at the end).
     pub simulated_s: f64,
@@ -191,6 +199,13 @@ impl RecordOptions {
             return Err(invalid(
                 "noise",
                 self.noise.to_string(),
+                "must be in [0, 1]",
+            ));
+        }
+        if !(0.0..=1.0).contains(&self.encounters) {
+            return Err(invalid(
+                "encounters",
+                self.encounters.to_string(),
                 "must be in [0, 1]",
             ));
         }
@@ -287,6 +302,9 @@ impl RecordOptions {
         for g in generated {
             h.update(format!("generated {:?}\n", g.scenario).as_bytes());
             h.update(Sha256::digest(g.plan.cells()));
+        }
+        if self.encounters > 0.0 {
+            h.update(format!("encounters {:?}\n", self.encounters).as_bytes());
         }
         if let Some(p) = &self.policy {
             let bytes = std::fs::read(&p.model).map_err(|e| {
@@ -391,6 +409,7 @@ fn plan_episode(loaded: &Loaded, seed: u64) -> Option<EpisodePlan> {
 struct Episode {
     scenario: usize,
     noisy: bool,
+    encounter: Option<encounter::Encounter>,
     samples: Vec<Sample>,
     simulated_s: f64,
 }
@@ -407,6 +426,7 @@ fn run_episode(
     let empty = Episode {
         scenario,
         noisy,
+        encounter: None,
         samples: Vec::new(),
         simulated_s: 0.0,
     };
@@ -430,6 +450,20 @@ fn run_episode(
         .iter()
         .map(|&(x_m, y_m)| PointSpec { x_m, y_m })
         .collect();
+    let encounter =
+        if ChaCha8Rng::seed_from_u64(mix(seed ^ 0x00E7_C0DE)).gen_bool(options.encounters) {
+            encounter::add(
+                &mut scenario_spec,
+                &base.planning,
+                &options.run.intention.planner,
+                &loaded.world,
+                start,
+                goals[0],
+                &mut ChaCha8Rng::seed_from_u64(mix(seed ^ 0x0E7C_0DE5)),
+            )
+        } else {
+            None
+        };
     let prepared = Prepared {
         path: base.path.clone(),
         scenario: scenario_spec,
@@ -477,6 +511,7 @@ fn run_episode(
     Ok(Episode {
         scenario,
         noisy,
+        encounter,
         samples: recorder.samples,
         simulated_s,
     })
@@ -531,6 +566,7 @@ pub fn record(
     })?;
     let mut writer = ShardWriter::new(out, options.image_px, options.shard_samples);
     let (mut episodes, mut noisy_episodes, mut simulated_s) = (0usize, 0usize, 0.0f64);
+    let mut encounters: BTreeMap<&'static str, Vec<u32>> = BTreeMap::new();
     let mut next_episode = 0u64;
     // Episodes that give nothing (no room, blocked start) must not loop for ever.
     let mut empty_in_a_row = 0usize;
@@ -593,6 +629,9 @@ pub fn record(
             noisy_episodes += usize::from(episode.noisy);
             #[allow(clippy::cast_possible_truncation)]
             let (scenario, id) = (episode.scenario as u32, *e as u32);
+            if let Some(kind) = episode.encounter {
+                encounters.entry(kind.as_str()).or_default().push(id);
+            }
             for sample in episode.samples {
                 if writer.samples() >= options.samples {
                     break;
@@ -601,12 +640,18 @@ pub fn record(
             }
         }
     }
-    let shards = writer.finish(&index_header(options, &dataset_id, &loaded))?;
+    let mut header = index_header(options, &dataset_id, &loaded);
+    header["encounters"] = serde_json::json!({
+        "probability": options.encounters,
+        "episodes": encounters,
+    });
+    let shards = writer.finish(&header)?;
     Ok(Summary {
         dataset_id,
         samples: writer.samples(),
         episodes,
         noisy_episodes,
+        encounters,
         shards,
         simulated_s,
         wall_s: started.elapsed().as_secs_f64(),

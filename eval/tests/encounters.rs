@@ -1,0 +1,128 @@
+//! Scripted encounters (`eval record --encounters P`): each kind fits on a real training
+//! scenario's routes, a glass door really closes the passage from wall to wall, and the
+//! privileged expert, which labels these episodes, stops short of the door and keeps clear of
+//! the people without contact.
+
+#![allow(clippy::unwrap_used)]
+use std::collections::BTreeMap;
+
+use eval::record::encounter::{self, Encounter};
+use eval::table::run::{run_with, Prepared};
+use eval::table::TableOptions;
+use protocol::ControllerKind;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use sim::scenario::{PointSpec, PoseSpec};
+use sim::{SimConfig, World};
+
+/// Scenarios with their encounters, found over random start/goal pairs of one training map.
+fn encounters_on(name: &str) -> (Prepared, BTreeMap<Encounter, Prepared>) {
+    let path = test_support::scenarios_dir().join(name);
+    let options = TableOptions::default();
+    let base = Prepared::load(&path, &options).unwrap();
+    let world = World::new(
+        base.scenario.clone(),
+        base.plan.clone(),
+        SimConfig::default(),
+    )
+    .unwrap();
+    let pairs = planning::sample::sample_pairs(&base.planning, 60, 7, 8.0, name).unwrap();
+    let mut found = BTreeMap::new();
+    for (i, (start, goal)) in pairs.iter().enumerate() {
+        if world
+            .disc_overlap(start.x_m, start.y_m, 0.4, None, true)
+            .is_some()
+            || world
+                .disc_overlap(goal.x_m, goal.y_m, 0.5, None, false)
+                .is_some()
+        {
+            continue;
+        }
+        let mut scenario = base.scenario.clone();
+        scenario.start = PoseSpec {
+            x_m: start.x_m,
+            y_m: start.y_m,
+            yaw_rad: start.yaw_rad,
+        };
+        scenario.goals = vec![PointSpec {
+            x_m: goal.x_m,
+            y_m: goal.y_m,
+        }];
+        let Some(kind) = encounter::add(
+            &mut scenario,
+            &base.planning,
+            &options.intention.planner,
+            &world,
+            *start,
+            (goal.x_m, goal.y_m),
+            &mut ChaCha8Rng::seed_from_u64(i as u64),
+        ) else {
+            continue;
+        };
+        if found.contains_key(&kind) {
+            continue;
+        }
+        let prepared = Prepared::new(&path, scenario, base.plan.clone(), &options).unwrap();
+        found.insert(kind, prepared);
+        if found.len() == Encounter::ALL.len() {
+            break;
+        }
+    }
+    (base, found)
+}
+
+#[test]
+fn every_kind_fits_and_the_expert_handles_it_without_contact() {
+    let (base, found) = encounters_on("train_office.yaml");
+    assert_eq!(
+        found.keys().copied().collect::<Vec<_>>(),
+        Encounter::ALL.to_vec(),
+        "not every kind fitted on train_office"
+    );
+    let options = TableOptions {
+        time_limit_s: Some(45.0),
+        // No intervention: the expert must hold before the door by itself.
+        stuck_timeout_s: 1000.0,
+        ..TableOptions::default()
+    };
+    for (kind, prepared) in &found {
+        let s = &prepared.scenario;
+        match kind {
+            Encounter::GlassDoor => {
+                assert_eq!(s.glass.len(), base.scenario.glass.len() + 1);
+                let pane = s.glass.last().unwrap();
+                let width = (pane.x1_m - pane.x0_m).hypot(pane.y1_m - pane.y0_m);
+                assert!((0.5..=3.2).contains(&width), "door {width} m wide");
+                // Both ends sit in the floor plan's walls: no gap to slip through.
+                for (x, y) in [(pane.x0_m, pane.y0_m), (pane.x1_m, pane.y1_m)] {
+                    let g = base.planning.to_grid(protocol::Pose2D::new(x, y, 0.0));
+                    let clearance_m = base.planning.clearance_m(g.x_m, g.y_m);
+                    assert!(
+                        clearance_m < 0.06,
+                        "door end ({x}, {y}) is {clearance_m} m from a wall"
+                    );
+                }
+            }
+            Encounter::PersonAhead | Encounter::PersonOncoming => {
+                assert_eq!(s.people.len(), base.scenario.people.len() + 1);
+                let person = s.people.last().unwrap();
+                let first = &person.route[0];
+                let from_start = (first.x_m - s.start.x_m).hypot(first.y_m - s.start.y_m);
+                assert!(
+                    from_start >= 2.0,
+                    "{kind:?} starts {from_start} m from the robot"
+                );
+            }
+        }
+        let (result, _) =
+            run_with(prepared, ControllerKind::Expert, 1, &options, |_| {}, None).unwrap();
+        assert_eq!(result.collisions.glass, 0, "{kind:?}: {result:?}");
+        assert_eq!(result.collisions.person, 0, "{kind:?}: {result:?}");
+        if *kind == Encounter::GlassDoor {
+            assert_eq!(result.goals_reached, 0, "the door closes the only way");
+            assert!(result.min_glass_distance_m.unwrap() > 0.02, "{result:?}");
+            // It drove up to the door rather than refusing to start.
+            assert!(result.path_length_m > 2.0, "{result:?}");
+        }
+    }
+}
