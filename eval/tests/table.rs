@@ -67,6 +67,15 @@ fn one_task_two_methods_writes_runs_table_and_figures() {
     }
     let time_s = expert["time_s"].as_f64().unwrap();
     assert!(time_s > 60.0 && time_s < 480.0, "{expert}");
+    // The intention audit planned from the true pose too, nearly every cycle, and AMCL's pose
+    // gave the true DLM in almost all of them.
+    let audit = &expert["intention_audit"];
+    let cycles = audit["cycles"].as_f64().unwrap();
+    assert!(cycles > 0.8 * time_s / 0.1, "{audit}");
+    assert!(
+        audit["dlm_differs"].as_f64().unwrap() < 0.1 * cycles,
+        "{audit}"
+    );
 
     let table = read_json(&out.path().join("table.json"));
     let rows = table["rows"].as_array().unwrap();
@@ -81,6 +90,7 @@ fn one_task_two_methods_writes_runs_table_and_figures() {
     assert!(md.contains("| task_a | expert | 1/1 |"), "{md}");
     assert!(md.contains("| task_a | dynamic-window |"), "{md}");
     assert!(md.contains("real-time factor"), "{md}");
+    assert!(md.contains("Wrong intentions from the pose"), "{md}");
 
     for picture in ["figures/task_a.png", "figures/grid.png"] {
         let img = image::open(out.path().join(picture))

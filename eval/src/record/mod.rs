@@ -473,6 +473,8 @@ fn run_episode(
     };
     let mut run = options.run.clone();
     run.time_limit_s = Some(options.episode_s);
+    // Labels do not need it; it would cost a second plan per cycle.
+    run.audit_intentions = false;
     if noisy {
         run.expert.motion_resync_radps += options.noise_peak_radps;
     }

@@ -6,6 +6,7 @@
 //! human. Runs spread over threads; [`report`] aggregates them into `runs.json`, `table.json`,
 //! `table.md` and the pictures.
 
+pub mod audit;
 pub mod judge;
 pub mod report;
 pub mod run;
@@ -61,6 +62,9 @@ pub struct TableOptions {
     pub intervention_ahead_m: f64,
     /// A run with more interventions than this fails.
     pub max_interventions: u32,
+    /// Also plans from the true pose every cycle and compares the DLMs ([`audit`]): how often
+    /// AMCL's error made the intention wrong. Costs a second plan per cycle.
+    pub audit_intentions: bool,
     /// Ends every run after this much simulated time instead of the scenario's time limit.
     pub time_limit_s: Option<f64>,
     /// The agent configuration (its controller and model are set per method).
@@ -79,6 +83,7 @@ impl Default for TableOptions {
             stuck_timeout_s: 10.0,
             intervention_ahead_m: 1.0,
             max_interventions: 30,
+            audit_intentions: true,
             time_limit_s: None,
             agent: AgentConfig::default(),
             intention: deterministic_intention_config(),

@@ -6,6 +6,7 @@ use std::path::Path;
 use protocol::ControllerKind;
 use serde::{Deserialize, Serialize};
 
+use super::audit::IntentionAudit;
 use super::run::{Prepared, RunResult, RunTrace};
 use super::TableError;
 use crate::figure::{self, GridRow, Trace};
@@ -85,6 +86,45 @@ pub struct Row {
     /// The smallest glass gap over all runs (`None` without glass).
     pub min_glass_distance_m: Option<f64>,
     pub mean_position_error_m: Option<Stat>,
+    /// The intention audit summed over the runs that have one.
+    #[serde(default)]
+    pub intention_audit: Option<IntentionAudit>,
+}
+
+/// Sums the audits of some runs (the mean errors weighted by their cycles); `None` if none.
+#[must_use]
+pub fn sum_audits<'a>(
+    audits: impl IntoIterator<Item = &'a IntentionAudit>,
+) -> Option<IntentionAudit> {
+    let mut total: Option<IntentionAudit> = None;
+    let (mut differs_m, mut agrees_m) = (0.0, 0.0);
+    for a in audits {
+        let t = total.get_or_insert_with(IntentionAudit::default);
+        t.cycles += a.cycles;
+        t.dlm_differs += a.dlm_differs;
+        t.turn_missed += a.turn_missed;
+        t.turn_wrong += a.turn_wrong;
+        t.events += a.events;
+        t.events_with_intervention += a.events_with_intervention;
+        #[allow(clippy::cast_precision_loss)]
+        {
+            differs_m += a.mean_error_when_differs_m * a.dlm_differs as f64;
+            agrees_m += a.mean_error_when_agrees_m * (a.cycles - a.dlm_differs) as f64;
+        }
+    }
+    if let Some(t) = total.as_mut() {
+        #[allow(clippy::cast_precision_loss)]
+        {
+            if t.dlm_differs > 0 {
+                t.mean_error_when_differs_m = differs_m / t.dlm_differs as f64;
+            }
+            let agree = t.cycles - t.dlm_differs;
+            if agree > 0 {
+                t.mean_error_when_agrees_m = agrees_m / agree as f64;
+            }
+        }
+    }
+    total
 }
 
 /// `table.json`: the rows and how they were made.
@@ -156,6 +196,9 @@ pub fn rows(runs: &[RunResult]) -> Vec<Row> {
                 min_person_distance_m: min_of(&|r| r.min_person_distance_m),
                 min_glass_distance_m: min_of(&|r| r.min_glass_distance_m),
                 mean_position_error_m: of(&|r| Some(r.mean_position_error_m)),
+                intention_audit: sum_audits(
+                    group.iter().filter_map(|r| r.intention_audit.as_ref()),
+                ),
                 scenario,
             }
         })
@@ -203,6 +246,9 @@ pub fn markdown(table: &Table) -> String {
             Stat::show(r.mean_position_error_m, 3),
         ));
     }
+    if table.rows.iter().any(|r| r.intention_audit.is_some()) {
+        out.push_str(&audit_markdown(&table.rows));
+    }
     out.push_str(&format!(
         "\n{} runs, {:.0} simulated s in {:.0} s wall clock on {} jobs: real-time factor {:.1}.\n",
         table.rows.iter().map(|r| r.runs).sum::<usize>(),
@@ -211,6 +257,44 @@ pub fn markdown(table: &Table) -> String {
         table.jobs,
         table.real_time_factor()
     ));
+    out
+}
+
+/// The intention audit: how often the DLM told from the agent's pose differed from the one the
+/// true pose gives (`eval::table::audit`), summed over seeds.
+fn audit_markdown(rows: &[Row]) -> String {
+    let mut out = format!(
+        "\nWrong intentions from the pose (summed over seeds): every cycle the pipeline also planned \
+         from the true pose. Missed: a turn needed, `go_forward` told; wrong: the opposite turn, or a \
+         turn where the truth went on. Event: at least {} such cycles in a row; blamed: an \
+         intervention within {:.0} s of its start.\n\n\
+         | scenario | method | cycles | DLM differs | turn missed | turn wrong | events | events → intervention | AMCL error when differs / agrees (m) |\n\
+         |---|---|---|---|---|---|---|---|---|\n",
+        super::audit::EVENT_CYCLES,
+        super::audit::BLAME_S,
+    );
+    for r in rows {
+        let Some(a) = &r.intention_audit else {
+            continue;
+        };
+        #[allow(clippy::cast_precision_loss)]
+        let pct = |n: u64| 100.0 * n as f64 / a.cycles.max(1) as f64;
+        out.push_str(&format!(
+            "| {} | {} | {} | {:.2} % | {} ({:.2} %) | {} ({:.2} %) | {} | {} | {:.3} / {:.3} |\n",
+            r.scenario,
+            r.method,
+            a.cycles,
+            pct(a.dlm_differs),
+            a.turn_missed,
+            pct(a.turn_missed),
+            a.turn_wrong,
+            pct(a.turn_wrong),
+            a.events,
+            a.events_with_intervention,
+            a.mean_error_when_differs_m,
+            a.mean_error_when_agrees_m,
+        ));
+    }
     out
 }
 

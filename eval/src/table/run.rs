@@ -17,7 +17,9 @@ use std::time::{Duration, Instant};
 
 use map_core::OccupancyGrid;
 use planning::{stop_intention, Answer, Goal, GoalProgress, IntentionPlanner, PlanningMap};
-use protocol::{normalize_angle, ControllerKind, Intention, MapName, MapRef, Pose2D, TaskId};
+use protocol::{
+    normalize_angle, ControllerKind, Intention, MapName, MapRef, Pose2D, PoseEstimate, TaskId,
+};
 use robot_agent::controllers::Controller;
 use robot_agent::node::Decision;
 use robot_agent::{make_controller, AgentConfig, Supervisor};
@@ -142,6 +144,9 @@ pub struct RunResult {
     pub max_position_error_m: f64,
     pub mean_heading_error_deg: f64,
     pub max_heading_error_deg: f64,
+    /// The DLM told against the DLM the true pose would have given (`None`: not audited).
+    #[serde(default)]
+    pub intention_audit: Option<super::audit::IntentionAudit>,
     /// Wall-clock seconds the run took (not deterministic; everything else is).
     pub wall_s: f64,
 }
@@ -340,6 +345,16 @@ pub fn run_with(
         IntentionPlanner::new(Arc::clone(&prepared.planning), options.intention.clone())
             .map_err(|e| setup("intention pipeline")(e.to_string()))?;
     let task_id = TaskId::new(name.clone()).ok();
+    // The same pipeline fed the true pose: what the robot should have been told.
+    let mut truth_pipeline = if options.audit_intentions {
+        Some(
+            IntentionPlanner::new(Arc::clone(&prepared.planning), options.intention.clone())
+                .map_err(|e| setup("intention pipeline")(e.to_string()))?,
+        )
+    } else {
+        None
+    };
+    let mut auditor = super::audit::Auditor::default();
 
     let dt_s = options.dt_s;
     // The supervisor's clock: a fixed origin plus simulated time.
@@ -447,6 +462,10 @@ pub fn run_with(
                     .set_pose(put, initial_covariance)
                     .map_err(|e| setup("intervention")(e.to_string()))?;
                 pipeline.clear_trail();
+                if let Some(p) = truth_pipeline.as_mut() {
+                    p.clear_trail();
+                }
+                auditor.on_intervention(t_s);
                 interventions += 1;
                 trace.interventions_m.push((truth_pose.x_m, truth_pose.y_m));
                 intervention_log.push(InterventionEvent {
@@ -499,6 +518,29 @@ pub fn run_with(
                     }
                     match plan {
                         Ok(p) => {
+                            if let Some(tp) = truth_pipeline.as_mut() {
+                                let true_estimate = PoseEstimate {
+                                    pose: truth_pose,
+                                    ..estimate.clone()
+                                };
+                                if let Answer::Heading {
+                                    goal_index: tk,
+                                    plan: Ok(tplan),
+                                } = tp.answer(
+                                    &true_estimate,
+                                    &GoalProgress::new(&goals, goal_index),
+                                    false,
+                                ) {
+                                    if tk == k {
+                                        auditor.on_cycle(
+                                            t_s,
+                                            p.dlm,
+                                            tplan.dlm,
+                                            estimate.pose.distance_m(&truth_pose),
+                                        );
+                                    }
+                                }
+                            }
                             last_path.clone_from(&p.path);
                             if planned_leg != Some(k) {
                                 planned_leg = Some(k);
@@ -606,6 +648,7 @@ pub fn run_with(
             max_position_error_m: max_err,
             mean_heading_error_deg: sum_yaw_err / n,
             max_heading_error_deg: max_yaw_err,
+            intention_audit: truth_pipeline.is_some().then(|| auditor.finish()),
             wall_s: started.elapsed().as_secs_f64(),
         },
         trace,
