@@ -86,6 +86,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--device", default="auto", help="cpu, cuda, or auto (cuda when available)")
     p.add_argument("--max-onnx-mb", type=float, default=export.MAX_MB, help="refuse an exported model larger than this")
     p.add_argument("--no-export", action="store_true", help="skip the ONNX export at the end")
+    p.add_argument("--init", help="start from this checkpoint's weights (same kind and architecture), e.g. "
+                   "the previous DAgger round's checkpoint_best.pt; optimiser and schedule start afresh")
     args = p.parse_args(argv)
     if args.backbone == "resnet50" and args.max_onnx_mb < 200:
         p.error("a ResNet-50 model is ~95 MB in ONNX (two for --lpe-branch separate); pass --max-onnx-mb 200 or more")
@@ -258,7 +260,15 @@ def main(argv=None) -> int:
     config = {"kind": args.kind, "backbone": args.backbone, "lpe_branch": args.lpe_branch}
     # Channels-last weights and images: oneDNN's fast convolution layout (the ONNX export is
     # built from a fresh model and does not depend on it).
-    net = model.build(config).to(device, memory_format=torch.channels_last)
+    net = model.build(config)
+    if args.init:
+        init = torch.load(args.init, map_location="cpu", weights_only=False)
+        if init.get("model_config") != config:
+            raise SystemExit(f"--init {args.init}: its model {init.get('model_config')} is not {config}")
+        net.load_state_dict(init["state_dict"])
+        r["init"] = str(Path(args.init).resolve())
+        r["init_datasets"] = init.get("card_inputs", {}).get("dataset_id")
+    net = net.to(device, memory_format=torch.channels_last)
     n_params = model.count_parameters(net)
     camera_px, lpe_px = pool.camera_px[0], pool.lpe_px[0]
     card_inputs = {
@@ -274,6 +284,9 @@ def main(argv=None) -> int:
         "lpe_rendering": pool.lpe_rendering,
     }
     deviations = recipe.deviations(r, config, camera_px, lpe_px, [ds.index for ds in pool.sets], args.minutes)
+    if args.init:
+        deviations.append(f"warm-started from the weights of {args.init} (an earlier round, trained on "
+                          f"dataset {r['init_datasets']}), as a DAgger round retrains the learner")
 
     if r["balance"]:
         w, cells = data.balance_weights(pool.dlm[train_idx], pool.label[train_idx])
