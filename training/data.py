@@ -45,6 +45,8 @@ DLM_NAMES = ("turn_left", "turn_right", "go_forward", "stop")
 GO_FORWARD = 2
 # |omega label| (normalised) bin edges for balancing: straight, gentle, turning, sharp.
 OMEGA_BINS = (0.1, 0.3, 0.6)
+# Normalised speed label below which a frame counts as slow (0.2 of 0.7 m/s: 0.14 m/s).
+SLOW_V = 0.2
 # Limits of the robot agent (robot-agent/src/config.rs Limits::default) for recordings whose
 # index.json does not state them.
 DEFAULT_MAX_SPEED_MPS = 0.7
@@ -201,14 +203,23 @@ def omega_bin(label_omega: np.ndarray) -> np.ndarray:
     return np.digitize(np.abs(label_omega), OMEGA_BINS)
 
 
-def balance_weights(dlm: np.ndarray, label: np.ndarray, max_boost: float = 10.0) -> tuple[np.ndarray, dict]:
+def balance_weights(dlm: np.ndarray, label: np.ndarray, max_boost: float = 10.0,
+                    by_speed: bool = False) -> tuple[np.ndarray, dict]:
     """Per-sample sampling weights giving every non-empty (DLM class, |omega| bin) cell the
     same total mass, except that no sample is drawn more than about `max_boost` times as often
     as under uniform sampling (a cell of 3 frames must not take 1/12 of every batch).
 
+    `by_speed` splits the go_forward cells by the speed label (slow: v < SLOW_V of the limit): the frames
+    where the expert holds back for a person or stops short of a glass door are well under 1 %
+    of a recording and would otherwise be drowned by the straight driving of their cell.
+
     Returns (weights summing to 1, {cell name: (count, share of draws)}) for the log."""
     cell = dlm * (len(OMEGA_BINS) + 1) + omega_bin(label[:, 1])
     ncells = 4 * (len(OMEGA_BINS) + 1)
+    if by_speed:
+        # Only go_forward frames: slow turning frames are mostly turns in place, common enough.
+        cell = cell * 2 + ((label[:, 0] < SLOW_V) & (dlm == GO_FORWARD))
+        ncells *= 2
     counts = np.bincount(cell, minlength=ncells).astype(np.float64)
     nonempty = np.count_nonzero(counts)
     # Equal mass per cell draws a sample of a cell of c samples n / (nonempty * c) times as
@@ -222,8 +233,12 @@ def balance_weights(dlm: np.ndarray, label: np.ndarray, max_boost: float = 10.0)
     report = {}
     for c in range(ncells):
         if counts[c]:
-            d, b = divmod(c, len(OMEGA_BINS) + 1)
-            report[f"{DLM_NAMES[d]} |w| {edges[b]:.1f}-{edges[b + 1]:.1f}"] = (int(counts[c]), float(mass[c]))
+            base, slow = divmod(c, 2) if by_speed else (c, None)
+            d, b = divmod(base, len(OMEGA_BINS) + 1)
+            name = f"{DLM_NAMES[d]} |w| {edges[b]:.1f}-{edges[b + 1]:.1f}"
+            if slow:
+                name += " slow"
+            report[name] = (int(counts[c]), float(mass[c]))
     return w, report
 
 

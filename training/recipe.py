@@ -23,6 +23,7 @@ PRESETS = {
         "schedule": "cosine",
         "samples_per_epoch": None,  # None: the number of training samples
         "balance": True,
+        "balance_speed": False,
         "augment": True,
         "randomize_intention": 0.2,
     },
@@ -35,6 +36,7 @@ PRESETS = {
         "schedule": "inverse",  # lr0 / (1 + k), k = epoch index
         "samples_per_epoch": 200_000,
         "balance": False,
+        "balance_speed": False,
         "augment": False,
         "randomize_intention": 0.0,
     },
@@ -90,7 +92,8 @@ def deviations(recipe: dict, model_config: dict, camera_px: int, lpe_px: int, in
     if recipe["samples_per_epoch"] != PAPER["samples_per_epoch"]:
         d.append(f"{recipe['samples_per_epoch']} samples per epoch instead of 200,000")
     if recipe["balance"]:
-        d.append("balanced sampling: equal mass per (DLM class, |omega| bin) cell, boost capped at 10x, instead of uniform")
+        cells = "(DLM class, |omega| bin, slow/moving)" if recipe.get("balance_speed") else "(DLM class, |omega| bin)"
+        d.append(f"balanced sampling: equal mass per {cells} cell, boost capped at 10x, instead of uniform")
     if recipe["augment"]:
         d.append("photometric augmentation of the camera image (brightness, multiply, contrast, blur, noise, pixel dropout)")
     if kind == "dlm" and recipe["randomize_intention"] > 0:

@@ -69,6 +69,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--schedule", choices=("cosine", "inverse", "constant"), help="override the preset's lr schedule")
     p.add_argument("--balance", action=argparse.BooleanOptionalAction, default=None,
                    help="balanced sampling by DLM class and |omega| bin (default on; paper off)")
+    p.add_argument("--balance-speed", action=argparse.BooleanOptionalAction, default=None,
+                   help="also split the balancing cells by slow/moving speed label (default off)")
     p.add_argument("--augment", action=argparse.BooleanOptionalAction, default=None,
                    help="photometric augmentation of the camera image (default on; paper off)")
     p.add_argument("--randomize-intention", type=float,
@@ -246,7 +248,7 @@ def main(argv=None) -> int:
     r = recipe.resolve(args.preset, {
         "loss": args.loss, "optimizer": args.optimizer, "lr": args.lr, "weight_decay": args.weight_decay,
         "batch": args.batch, "schedule": args.schedule, "samples_per_epoch": args.samples_per_epoch,
-        "balance": args.balance, "augment": args.augment, "randomize_intention": args.randomize_intention,
+        "balance": args.balance, "balance_speed": args.balance_speed, "augment": args.augment, "randomize_intention": args.randomize_intention,
     })
     if r["samples_per_epoch"] is None:
         r["samples_per_epoch"] = int(len(train_idx))
@@ -289,7 +291,8 @@ def main(argv=None) -> int:
                           f"dataset {r['init_datasets']}), as a DAgger round retrains the learner")
 
     if r["balance"]:
-        w, cells = data.balance_weights(pool.dlm[train_idx], pool.label[train_idx])
+        w, cells = data.balance_weights(pool.dlm[train_idx], pool.label[train_idx],
+                                        by_speed=bool(r.get("balance_speed")))
     else:
         w, cells = None, {}
     print(f"data: {len(pool)} samples ({', '.join(pool.dataset_ids)}), camera {camera_px} px, lpe {lpe_px} px; "
