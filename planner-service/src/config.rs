@@ -48,6 +48,18 @@ pub struct HttpConfig {
     pub cors: Vec<String>,
     /// Image limits of uploaded floor plans, checked before decoding.
     pub import_limits: ImportLimits,
+    /// Longest wait for a request's complete head (request line and headers), in
+    /// milliseconds, counted from when the server starts waiting for it: on a new connection,
+    /// and on a kept-alive one after the previous response. A connection that sends no
+    /// complete head in time (a slow or silent client, an idle keep-alive) is closed.
+    pub header_read_timeout_ms: u64,
+    /// A connection on which no byte moves either way for this long, in milliseconds, is
+    /// closed (a stalled request body, a client that stops reading the answer, a handler that
+    /// takes longer). The event stream sends a comment line at least every half of it.
+    pub idle_timeout_ms: u64,
+    /// Most connections open at once; the next one is answered `503` with `Retry-After` and
+    /// closed.
+    pub max_connections: u32,
 }
 
 impl Default for HttpConfig {
@@ -60,6 +72,9 @@ impl Default for HttpConfig {
             protect_reads: false,
             cors: Vec::new(),
             import_limits: ImportLimits::default(),
+            header_read_timeout_ms: 10_000,
+            idle_timeout_ms: 60_000,
+            max_connections: 256,
         }
     }
 }
@@ -83,7 +98,21 @@ pub enum HttpConfigError {
         "invalid http.cors entry {origin:?}: expected \"*\" or an origin like \"http://host:port\""
     )]
     CorsOrigin { origin: String },
+    #[error("invalid {field} = {value}: must be within {min}..={max}")]
+    OutOfRange {
+        /// `http.header_read_timeout_ms`, `http.idle_timeout_ms` or `http.max_connections`.
+        field: &'static str,
+        value: u64,
+        min: u64,
+        max: u64,
+    },
 }
+
+/// Longest accepted `http.header_read_timeout_ms` and `http.idle_timeout_ms`: one hour.
+pub const MAX_HTTP_TIMEOUT_MS: u64 = 3_600_000;
+
+/// Most accepted `http.max_connections`.
+pub const MAX_HTTP_CONNECTIONS: u32 = 65_536;
 
 impl HttpConfig {
     /// Checks limits, token and CORS origins.
@@ -97,6 +126,35 @@ impl HttpConfig {
         ] {
             if value_bytes == 0 || usize::try_from(value_bytes).is_err() {
                 return Err(HttpConfigError::BodyLimit { field, value_bytes });
+            }
+        }
+        for (field, value, min, max) in [
+            (
+                "http.header_read_timeout_ms",
+                self.header_read_timeout_ms,
+                1,
+                MAX_HTTP_TIMEOUT_MS,
+            ),
+            (
+                "http.idle_timeout_ms",
+                self.idle_timeout_ms,
+                1,
+                MAX_HTTP_TIMEOUT_MS,
+            ),
+            (
+                "http.max_connections",
+                u64::from(self.max_connections),
+                1,
+                u64::from(MAX_HTTP_CONNECTIONS),
+            ),
+        ] {
+            if !(min..=max).contains(&value) {
+                return Err(HttpConfigError::OutOfRange {
+                    field,
+                    value,
+                    min,
+                    max,
+                });
             }
         }
         if let Some(token) = &self.token {
@@ -328,6 +386,21 @@ mod tests {
         let err =
             ServiceConfig::from_toml_str("[http]\ncors = [\"example.com\"]\n", "t").unwrap_err();
         assert!(err.to_string().contains("example.com"), "{err}");
+        let err = ServiceConfig::from_toml_str("[http]\nidle_timeout_ms = 0\n", "t").unwrap_err();
+        assert!(
+            err.to_string().contains("http.idle_timeout_ms = 0"),
+            "{err}"
+        );
+        let err = ServiceConfig::from_toml_str("[http]\nheader_read_timeout_ms = 3600001\n", "t")
+            .unwrap_err();
+        assert!(err.to_string().contains("header_read_timeout_ms"), "{err}");
+        let err = ServiceConfig::from_toml_str("[http]\nmax_connections = 0\n", "t").unwrap_err();
+        assert!(
+            err.to_string().contains("http.max_connections = 0"),
+            "{err}"
+        );
+        let err = ServiceConfig::from_toml_str("[http]\nidle_timeout = 5\n", "t").unwrap_err();
+        assert!(err.to_string().contains("idle_timeout"), "{err}");
         let err = ServiceConfig::from_toml_str("[http]\nlisten = \"nowhere\"\n", "t").unwrap_err();
         assert!(err.to_string().contains("listen"), "{err}");
         let err = ServiceConfig::from_toml_str("[zenoh]\nsite = \"a/b\"\n", "t").unwrap_err();

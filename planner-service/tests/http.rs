@@ -1179,3 +1179,528 @@ fn serve_command_prints_its_url_and_stops_on_sigterm() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("http.token"));
 }
+
+// ----- hardening (issue 17): input edges -------------------------------------------------
+
+/// Sends raw bytes on a fresh connection, closes the sending side and returns the status line
+/// and body of the answer.
+async fn raw_exchange(url: &str, request: &[u8]) -> (String, String) {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let addr = url.strip_prefix("http://").unwrap();
+    let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
+    s.write_all(request).await.unwrap();
+    s.shutdown().await.unwrap();
+    let mut answer = Vec::new();
+    tokio::time::timeout(Duration::from_secs(20), s.read_to_end(&mut answer))
+        .await
+        .expect("an answer in time")
+        .unwrap();
+    let text = String::from_utf8_lossy(&answer).to_string();
+    let (head, body) = text.split_once("\r\n\r\n").unwrap_or((&text, ""));
+    (
+        head.lines().next().unwrap_or("").to_string(),
+        body.to_string(),
+    )
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn truncated_multipart_uploads_get_a_400() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = start(dir.path(), config()).await;
+    let url = server.url();
+    let png = read("testmap.png");
+    let mut body = b"--XB\r\nContent-Disposition: form-data; name=\"name\"\r\n\r\nm\r\n--XB\r\nContent-Disposition: form-data; name=\"picture\"; filename=\"p.png\"\r\nContent-Type: image/png\r\n\r\n".to_vec();
+    body.extend_from_slice(&png[..png.len() / 2]);
+    let head = |len: usize| {
+        format!(
+            "POST /api/v1/maps HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {TOKEN}\r\nContent-Type: multipart/form-data; boundary=XB\r\nContent-Length: {len}\r\nConnection: close\r\n\r\n"
+        )
+        .into_bytes()
+    };
+    // The client promised 5000 bytes and hung up after fewer (was: 500 "failed to read stream").
+    let request = [head(5000), body.clone()].concat();
+    let (status, answer) = raw_exchange(&url, &request).await;
+    assert!(status.starts_with("HTTP/1.1 400"), "{status} {answer}");
+    let answer: Value = serde_json::from_str(&answer).unwrap();
+    assert_eq!(answer["error"], "bad_request");
+    assert!(
+        answer["reason"].as_str().unwrap().contains("multipart"),
+        "{answer}"
+    );
+    // A body that is whole as HTTP but ends inside a part (no closing boundary).
+    let request = [head(body.len()), body].concat();
+    let (status, answer) = raw_exchange(&url, &request).await;
+    assert!(status.starts_with("HTTP/1.1 400"), "{status} {answer}");
+    assert_eq!(map_count(&client(), &url).await, 0);
+    server.stop().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn numbers_out_of_their_physical_range_are_refused_and_store_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = start(dir.path(), config()).await;
+    let url = server.url();
+    let c = client();
+    let upload = |form: Form| {
+        c.post(format!("{url}/api/v1/maps"))
+            .bearer_auth(TOKEN)
+            .multipart(form)
+            .send()
+    };
+    let yaml = std::fs::read_to_string(nav2("testmap.yaml")).unwrap();
+    let png = read("testmap.png");
+    let ros = |yaml: String| {
+        Form::new()
+            .text("name", "t")
+            .part("yaml", Part::bytes(yaml.into_bytes()).file_name("t.yaml"))
+            .part("image", Part::bytes(png.clone()).file_name("testmap.png"))
+    };
+    let maps: Vec<(&str, Form, &str)> = vec![
+        (
+            "tiny resolution in yaml",
+            ros(yaml.replace("resolution: 0.1", "resolution: 1e-300")),
+            "resolution = 1e-300",
+        ),
+        (
+            "huge resolution in yaml",
+            ros(yaml.replace("resolution: 0.1", "resolution: 11")),
+            "resolution = 11",
+        ),
+        (
+            "far origin in yaml",
+            ros(yaml.replace("origin: [2.0, 3.0, 1.0]", "origin: [1e308, 3.0, 1.0]")),
+            "origin.x_m = 1e308",
+        ),
+        (
+            "origin yaw in yaml",
+            ros(yaml.replace("origin: [2.0, 3.0, 1.0]", "origin: [2.0, 3.0, 1e300]")),
+            "origin.yaw_rad = 1e300",
+        ),
+        (
+            "map reaching past 100 km",
+            ros(yaml.replace("origin: [2.0, 3.0, 1.0]", "origin: [99999.5, 3.0, 0.0]")),
+            "extent",
+        ),
+        (
+            "tiny picture resolution",
+            picture_form("p", "testmap.png", "1e-300"),
+            "resolution_m = 1e-300",
+        ),
+        (
+            "far picture origin",
+            picture_form("p", "testmap.png", "0.1").text("origin_y_m", "-2.5e301"),
+            "origin_y_m = -2.5e301",
+        ),
+    ];
+    for (what, form, needle) in maps {
+        let reason = expect_error(
+            upload(form).await.unwrap(),
+            StatusCode::BAD_REQUEST,
+            "bad_request",
+        )
+        .await;
+        assert!(reason.contains(needle), "{what}: {reason}");
+    }
+    assert_eq!(map_count(&c, &url).await, 0);
+    // The edges themselves are accepted.
+    let resp = upload(picture_form("edge", "testmap.png", "10").text("origin_x_m", "-99000"))
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), StatusCode::CREATED);
+    let resp = upload(picture_form("fine", "testmap.png", "0.001"))
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), StatusCode::CREATED);
+
+    upload_depot(&c, &url).await;
+    let ((fx, fy), _) = depot_points();
+    let tasks: Vec<(Value, &str)> = vec![
+        (
+            serde_json::json!({"map": "depot", "goals": [{"x_m": 2.5e301, "y_m": fy}]}),
+            "goals[0].x_m = 2.5e301",
+        ),
+        (
+            serde_json::json!({"map": "depot", "goals": [{"x_m": fx, "y_m": fy}, {"x_m": fx, "y_m": -1e308}]}),
+            "goals[1].y_m = -1e308",
+        ),
+        (
+            serde_json::json!({"map": "depot", "goals": [{"x_m": fx, "y_m": fy, "yaw_rad": 1e300}]}),
+            "goals[0].yaw_rad = 1e300",
+        ),
+        (
+            serde_json::json!({"map": "depot", "goals": [{"x_m": fx, "y_m": fy, "yaw_rad": 6.3}]}),
+            "goals[0].yaw_rad = 6.3",
+        ),
+    ];
+    for (body, needle) in tasks {
+        let resp = c
+            .post(format!("{url}/api/v1/tasks"))
+            .bearer_auth(TOKEN)
+            .json(&body)
+            .send()
+            .await
+            .unwrap();
+        let reason = expect_error(resp, StatusCode::BAD_REQUEST, "bad_request").await;
+        assert!(reason.contains(needle), "{body}: {reason}");
+        assert!(reason.len() < 200, "{reason}");
+    }
+    assert_eq!(task_count(&c, &url).await, 0);
+    // -2π and a free heading are fine.
+    let resp = c
+        .post(format!("{url}/api/v1/tasks"))
+        .bearer_auth(TOKEN)
+        .json(&serde_json::json!({"map": "depot", "goals": [{"x_m": fx, "y_m": fy, "yaw_rad": -std::f64::consts::TAU}, {"x_m": fx, "y_m": fy, "yaw_rad": null}]}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), StatusCode::CREATED);
+
+    // The version of an image: 1 to 2^32 - 1, as documented.
+    for v in ["0", "4294967296", "-1"] {
+        let resp = c
+            .get(format!("{url}/api/v1/maps/depot/image?version={v}"))
+            .send()
+            .await
+            .unwrap();
+        expect_error(resp, StatusCode::BAD_REQUEST, "bad_request").await;
+    }
+    let resp = c
+        .get(format!("{url}/api/v1/maps/depot/image?version=4294967295"))
+        .send()
+        .await
+        .unwrap();
+    expect_error(resp, StatusCode::NOT_FOUND, "not_found").await;
+    server.stop().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn error_reasons_hide_server_paths_and_cut_long_values() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = start(dir.path(), config()).await;
+    let url = server.url();
+    let c = client();
+    let yaml = std::fs::read_to_string(nav2("testmap.yaml")).unwrap();
+    let hidden = |reason: &str| {
+        let data_dir = dir.path().display().to_string();
+        assert!(!reason.contains(&data_dir), "{reason}");
+        assert!(!reason.contains("uploads"), "{reason}");
+        assert!(!reason.contains("/tmp"), "{reason}");
+        assert!(
+            !reason.contains(&format!("{}-", std::process::id())),
+            "{reason}"
+        );
+    };
+    // An image that does not decode (was: "cannot decode image /tmp/…/uploads/<pid>-<n>/map.pgm").
+    let form = Form::new()
+        .text("name", "t")
+        .part("yaml", Part::bytes(yaml.into_bytes()).file_name("t.yaml"))
+        .part(
+            "image",
+            Part::bytes(b"P5 junk".to_vec()).file_name("broken.pgm"),
+        );
+    let resp = c
+        .post(format!("{url}/api/v1/maps"))
+        .bearer_auth(TOKEN)
+        .multipart(form)
+        .send()
+        .await
+        .unwrap();
+    let reason = expect_error(resp, StatusCode::BAD_REQUEST, "bad_request").await;
+    hidden(&reason);
+    assert!(reason.contains("part `image` (broken.pgm)"), "{reason}");
+    let resp = c
+        .post(format!("{url}/api/v1/maps/preview"))
+        .bearer_auth(TOKEN)
+        .multipart(
+            Form::new()
+                .part(
+                    "picture",
+                    Part::bytes(b"GIF89a".to_vec()).file_name("p.gif"),
+                )
+                .text("resolution_m", "0.1"),
+        )
+        .send()
+        .await
+        .unwrap();
+    let reason = expect_error(resp, StatusCode::BAD_REQUEST, "bad_request").await;
+    hidden(&reason);
+    assert!(reason.contains("part `picture` (p.gif)"), "{reason}");
+
+    // A 20 000-character id is echoed as 64 characters and an ellipsis.
+    let long = "a".repeat(20_000);
+    let resp = c
+        .get(format!("{url}/api/v1/tasks/{long}"))
+        .send()
+        .await
+        .unwrap();
+    let reason = expect_error(resp, StatusCode::BAD_REQUEST, "bad_request").await;
+    assert!(reason.contains('…') && reason.len() < 300, "{reason}");
+    let resp = c
+        .post(format!("{url}/api/v1/tasks"))
+        .bearer_auth(TOKEN)
+        .json(&serde_json::json!({"map": "depot", "robot_id": long, "goals": [{"x_m": 1.0, "y_m": 1.0}]}))
+        .send()
+        .await
+        .unwrap();
+    let reason = expect_error(resp, StatusCode::BAD_REQUEST, "bad_request").await;
+    assert!(
+        reason.contains("robot_id") && reason.contains('…') && reason.len() < 600,
+        "{reason}"
+    );
+    let resp = c.get(format!("{url}/no/such/{long}")).send().await.unwrap();
+    let reason = expect_error(resp, StatusCode::NOT_FOUND, "not_found").await;
+    assert!(reason.len() < 200, "{reason}");
+    server.stop().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_bearer_scheme_is_case_insensitive() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = start(dir.path(), config()).await;
+    let url = server.url();
+    let c = client();
+    for (i, scheme) in ["bearer", "BEARER", "bEaReR", "Bearer"].iter().enumerate() {
+        let resp = c
+            .post(format!("{url}/api/v1/maps"))
+            .header("Authorization", format!("{scheme}  {TOKEN}"))
+            .multipart(picture_form(&format!("m{i}"), "testmap.png", "0.1"))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(resp.status(), StatusCode::CREATED, "{scheme}");
+    }
+    for value in [
+        format!("Basic {TOKEN}"),
+        format!("bearer{TOKEN}"),
+        "bearer wrong-token-0123456789".to_string(),
+    ] {
+        let resp = c
+            .post(format!("{url}/api/v1/maps"))
+            .header("Authorization", value.clone())
+            .multipart(picture_form("x", "testmap.png", "0.1"))
+            .send()
+            .await
+            .unwrap();
+        expect_error(resp, StatusCode::UNAUTHORIZED, "unauthorized").await;
+    }
+    assert_eq!(map_count(&c, &url).await, 4);
+    server.stop().await.unwrap();
+}
+
+#[test]
+fn openapi_document_states_the_bounds_the_server_checks() {
+    use planner_service::http::ranges;
+    let doc = planner_service::http::openapi::document();
+    let schema = |p: &str| doc.pointer(p).unwrap_or_else(|| panic!("{p}")).clone();
+    // Ids and names: never empty, never longer than the protocol allows.
+    for (p, max) in [
+        ("/components/schemas/NewTask/properties/map", 51),
+        ("/components/schemas/NewTask/properties/robot_id", 64),
+        (
+            "/paths/~1api~1v1~1maps/post/requestBody/content/multipart~1form-data/schema/properties/name",
+            51,
+        ),
+    ] {
+        let s = schema(p);
+        assert_eq!(s["minLength"], 1, "{p}");
+        assert_eq!(s["maxLength"], max, "{p}");
+        assert!(s["pattern"].as_str().unwrap().starts_with('^'), "{p}");
+    }
+    let version = &doc["paths"]["/api/v1/maps/{name}/image"]["get"]["parameters"][1];
+    assert_eq!(version["name"], "version");
+    assert_eq!(version["schema"]["minimum"], 1);
+    assert_eq!(version["schema"]["maximum"], u64::from(u32::MAX));
+    for (p, min, max) in [
+        (
+            "/components/schemas/Goal/properties/x_m",
+            -ranges::MAX_COORDINATE_M,
+            ranges::MAX_COORDINATE_M,
+        ),
+        (
+            "/components/schemas/Goal/properties/y_m",
+            -ranges::MAX_COORDINATE_M,
+            ranges::MAX_COORDINATE_M,
+        ),
+        (
+            "/components/schemas/Goal/properties/yaw_rad",
+            -ranges::MAX_ABS_YAW_RAD,
+            ranges::MAX_ABS_YAW_RAD,
+        ),
+        (
+            "/paths/~1api~1v1~1maps/post/requestBody/content/multipart~1form-data/schema/properties/resolution_m",
+            ranges::MIN_RESOLUTION_M,
+            ranges::MAX_RESOLUTION_M,
+        ),
+        (
+            "/paths/~1api~1v1~1maps~1preview/post/requestBody/content/multipart~1form-data/schema/properties/origin_x_m",
+            -ranges::MAX_COORDINATE_M,
+            ranges::MAX_COORDINATE_M,
+        ),
+    ] {
+        let s = schema(p);
+        assert_eq!(s["minimum"].as_f64(), Some(min), "{p}");
+        assert_eq!(s["maximum"].as_f64(), Some(max), "{p}");
+    }
+    let codes = schema("/components/schemas/Error/properties/error/enum");
+    assert!(codes
+        .as_array()
+        .unwrap()
+        .contains(&Value::from("unavailable")));
+}
+
+// ----- hardening (issue 17): connections -------------------------------------------------
+
+/// Reads until the server closes the connection; how long that took, or `None` when it was
+/// still open after `limit`.
+async fn closed_within(s: &mut tokio::net::TcpStream, limit: Duration) -> Option<Duration> {
+    use tokio::io::AsyncReadExt;
+    let t0 = std::time::Instant::now();
+    let mut buf = [0_u8; 1024];
+    let read_all = async {
+        loop {
+            match s.read(&mut buf).await {
+                Ok(0) | Err(_) => break,
+                Ok(_) => {}
+            }
+        }
+    };
+    tokio::time::timeout(limit, read_all).await.ok()?;
+    Some(t0.elapsed())
+}
+
+async fn connect_and_send(url: &str, bytes: &[u8]) -> tokio::net::TcpStream {
+    use tokio::io::AsyncWriteExt;
+    let mut s = tokio::net::TcpStream::connect(url.strip_prefix("http://").unwrap())
+        .await
+        .unwrap();
+    s.write_all(bytes).await.unwrap();
+    s
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn slow_and_idle_connections_are_closed_and_extra_ones_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = config();
+    cfg.http.header_read_timeout_ms = 1500;
+    cfg.http.idle_timeout_ms = 3000;
+    cfg.http.max_connections = 3;
+    let server = start(dir.path(), cfg).await;
+    let url = server.url();
+    let half_head = b"GET /healthz HTTP/1.1\r\nHost: x\r\n";
+    // A fresh connection per request, so that no pooled connection holds a slot.
+    let fresh = || {
+        reqwest::Client::builder()
+            .timeout(Duration::from_secs(20))
+            .pool_max_idle_per_host(0)
+            .build()
+            .unwrap()
+    };
+
+    // Half a request head, nothing at all, and a request whose body stalls: the first two are
+    // closed by the header-read timeout, the third by the idle timeout.
+    let mut slow = connect_and_send(&url, half_head).await;
+    let mut silent = connect_and_send(&url, b"").await;
+    let stalled_head = format!(
+        "POST /api/v1/tasks HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {TOKEN}\r\nContent-Type: application/json\r\nContent-Length: 100\r\n\r\n{{\"map\":"
+    );
+    let mut stalled = connect_and_send(&url, stalled_head.as_bytes()).await;
+    let limit = Duration::from_secs(15);
+    let (a, b, c) = tokio::join!(
+        closed_within(&mut slow, limit),
+        closed_within(&mut silent, limit),
+        closed_within(&mut stalled, limit)
+    );
+    let (a, b, c) = (a.unwrap(), b.unwrap(), c.unwrap());
+    let header = Duration::from_millis(1500);
+    let idle = Duration::from_millis(3000);
+    assert!(
+        a >= header - Duration::from_millis(100) && a < header * 4,
+        "{a:?}"
+    );
+    assert!(
+        b >= header - Duration::from_millis(100) && b < header * 4,
+        "{b:?}"
+    );
+    assert!(
+        c >= idle - Duration::from_millis(100) && c < idle * 3,
+        "{c:?}"
+    );
+
+    // Two slow clients hold two of the three slots: requests still work.
+    let mut holders = vec![
+        connect_and_send(&url, half_head).await,
+        connect_and_send(&url, half_head).await,
+    ];
+    // (Retried for a moment: on a busy test machine a stray connection from another process,
+    // e.g. a Zenoh peer retrying a port that this listener now has, can take a slot briefly.)
+    let healthy = || async {
+        let t0 = std::time::Instant::now();
+        loop {
+            let status = fresh()
+                .get(format!("{url}/healthz"))
+                .send()
+                .await
+                .unwrap()
+                .status();
+            if status == StatusCode::OK || t0.elapsed() > Duration::from_secs(3) {
+                return status;
+            }
+            tokio::time::sleep(Duration::from_millis(250)).await;
+        }
+    };
+    assert_eq!(healthy().await, StatusCode::OK);
+    // (The server notices the client's close a moment later.)
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    // A third takes the last slot: one more is refused at once, with a reason and a retry time.
+    holders.push(connect_and_send(&url, half_head).await);
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let t0 = std::time::Instant::now();
+    let (status, body) = raw_exchange(&url, b"GET /healthz HTTP/1.1\r\nHost: x\r\n\r\n").await;
+    assert!(t0.elapsed() < Duration::from_secs(1), "{:?}", t0.elapsed());
+    assert!(status.starts_with("HTTP/1.1 503"), "{status}");
+    let body: Value = serde_json::from_str(&body).unwrap();
+    assert_eq!(body["error"], "unavailable");
+    assert!(
+        body["reason"].as_str().unwrap().contains("max_connections"),
+        "{body}"
+    );
+    let resp = fresh().get(format!("{url}/healthz")).send().await.unwrap();
+    assert_eq!(resp.status(), StatusCode::SERVICE_UNAVAILABLE);
+    assert_eq!(resp.headers()["retry-after"], "1");
+    // Once the slow clients are timed out, the slots are free again.
+    for h in &mut holders {
+        assert!(closed_within(h, limit).await.is_some());
+    }
+    assert_eq!(healthy().await, StatusCode::OK);
+
+    // A quiet event stream is not idle: keep-alive comments come every half idle timeout.
+    let mut events = fresh()
+        .get(format!("{url}/api/v1/events"))
+        .send()
+        .await
+        .unwrap();
+    let t0 = std::time::Instant::now();
+    let mut keep_alives = 0;
+    while t0.elapsed() < idle + Duration::from_millis(1500) {
+        let chunk = tokio::time::timeout(Duration::from_secs(5), events.chunk())
+            .await
+            .expect("the stream stays open")
+            .unwrap()
+            .expect("the stream is not closed");
+        keep_alives += String::from_utf8_lossy(&chunk)
+            .matches(": keep-alive")
+            .count();
+    }
+    assert!(keep_alives >= 2, "{keep_alives}");
+    drop(events);
+
+    // Stopping closes connections that wait for a head at once.
+    let mut waiting = connect_and_send(&url, half_head).await;
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let t0 = std::time::Instant::now();
+    server.stop().await.unwrap();
+    assert!(closed_within(&mut waiting, Duration::from_secs(5))
+        .await
+        .is_some());
+    assert!(t0.elapsed() < Duration::from_secs(5), "{:?}", t0.elapsed());
+}

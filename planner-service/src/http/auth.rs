@@ -115,6 +115,19 @@ fn same_token(given: &str, expected: &str) -> bool {
     diff == 0
 }
 
+/// The token of an `Authorization: Bearer <token>` value. The scheme is case-insensitive and
+/// followed by one or more spaces (RFC 7235 §2.1, RFC 6750 §2.1), so `bearer`, `BEARER` and
+/// `Bearer` all work; `None` for another scheme or no token.
+fn bearer_credentials(value: &str) -> Option<&str> {
+    let value = value.trim();
+    let (scheme, rest) = value.split_once([' ', '\t'])?;
+    if !scheme.eq_ignore_ascii_case("bearer") {
+        return None;
+    }
+    let token = rest.trim_start_matches([' ', '\t']);
+    (!token.is_empty()).then_some(token)
+}
+
 /// Paths that stay open with `protect_reads`: the dashboard has to load before it can ask the
 /// user for a token, and health probes carry none.
 fn always_open(path: &str) -> bool {
@@ -130,8 +143,8 @@ pub async fn check_token(State(state): State<AppState>, req: Request, next: Next
     }
     let header_token = match req.headers().get(header::AUTHORIZATION) {
         None => None,
-        Some(v) => match v.to_str().ok().and_then(|s| s.strip_prefix("Bearer ")) {
-            Some(t) => Some(t.trim().to_string()),
+        Some(v) => match v.to_str().ok().and_then(bearer_credentials) {
+            Some(t) => Some(t.to_string()),
             None => {
                 return ApiError::unauthorized("the Authorization header must be `Bearer <token>`")
                     .into_response()
@@ -173,6 +186,29 @@ mod tests {
         assert!(!same_token("abcdef012345678", "abcdef0123456789"));
         assert!(!same_token("abcdef01234567890", "abcdef0123456789"));
         assert!(!same_token("", "abcdef0123456789"));
+    }
+
+    #[test]
+    fn bearer_scheme_is_case_insensitive() {
+        for v in [
+            "Bearer abc",
+            "bearer abc",
+            "BEARER abc",
+            "bEaReR   abc",
+            " Bearer abc ",
+        ] {
+            assert_eq!(bearer_credentials(v), Some("abc"), "{v:?}");
+        }
+        for v in [
+            "Basic abc",
+            "Bearer",
+            "Bearer ",
+            "Bearerabc",
+            "Token abc",
+            "",
+        ] {
+            assert_eq!(bearer_credentials(v), None, "{v:?}");
+        }
     }
 
     #[test]

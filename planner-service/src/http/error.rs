@@ -94,15 +94,86 @@ impl std::fmt::Display for ApiError {
 
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
-        if self.status.is_server_error() {
+        let reason = if self.status.is_server_error() {
+            // The log keeps the whole reason; the client gets it without the host's paths.
             tracing::error!(status = %self.status, reason = %self.reason, "request failed");
-        }
+            tidy_reason(&scrub_paths(&self.reason))
+        } else {
+            tidy_reason(&self.reason)
+        };
         let body = Body {
             error: self.code(),
-            reason: &self.reason,
+            reason: &reason,
         };
         (self.status, Json(body)).into_response()
     }
+}
+
+/// Longest run of characters without a space that a reason repeats (ids, numbers, file names,
+/// values the client sent); longer ones are cut and end in `…`.
+pub const MAX_REASON_WORD_CHARS: usize = 64;
+
+/// Longest reason sent, in characters; a longer one is cut and ends in `…`.
+pub const MAX_REASON_CHARS: usize = 512;
+
+/// A reason as the client gets it: every word of more than [`MAX_REASON_WORD_CHARS`]
+/// characters cut to that many plus `…`, the whole cut to [`MAX_REASON_CHARS`] plus `…`.
+/// A client that sends a 20 000-character id gets a reason of a few dozen characters back.
+#[must_use]
+pub fn tidy_reason(reason: &str) -> String {
+    let mut out = String::with_capacity(reason.len().min(MAX_REASON_CHARS + 4));
+    let mut total = 0_usize;
+    let mut word = 0_usize;
+    for c in reason.chars() {
+        if total == MAX_REASON_CHARS {
+            out.push('…');
+            break;
+        }
+        if c.is_whitespace() {
+            word = 0;
+        } else {
+            word += 1;
+            if word == MAX_REASON_WORD_CHARS + 1 {
+                out.push('…');
+                total += 1;
+                continue;
+            }
+            if word > MAX_REASON_WORD_CHARS {
+                continue;
+            }
+        }
+        out.push(c);
+        total += 1;
+    }
+    out
+}
+
+/// Replaces absolute file-system paths (`/…/…`) in a server error's reason with
+/// `<server path>`: they tell a client how the host is laid out and nothing it can act on.
+#[must_use]
+pub fn scrub_paths(reason: &str) -> String {
+    let mut out = String::with_capacity(reason.len());
+    for (i, piece) in reason.split(' ').enumerate() {
+        if i > 0 {
+            out.push(' ');
+        }
+        let start = piece
+            .find(|c: char| !matches!(c, '(' | '"' | '\'' | '`' | '['))
+            .unwrap_or(piece.len());
+        let (lead, rest) = piece.split_at(start);
+        let end = rest
+            .rfind(|c: char| !matches!(c, ')' | '"' | '\'' | '`' | ']' | ':' | ',' | ';' | '.'))
+            .map_or(0, |e| e + 1);
+        let (path, trail) = rest.split_at(end);
+        if path.starts_with('/') && path[1..].contains('/') {
+            out.push_str(lead);
+            out.push_str("<server path>");
+            out.push_str(trail);
+        } else {
+            out.push_str(piece);
+        }
+    }
+    out
 }
 
 impl From<MapError> for ApiError {
@@ -172,11 +243,15 @@ impl From<MultipartRejection> for ApiError {
 
 impl From<MultipartError> for ApiError {
     fn from(e: MultipartError) -> Self {
-        let status = e.status();
-        if status == StatusCode::PAYLOAD_TOO_LARGE {
+        if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
             Self::too_large(format!("upload too large: {}", e.body_text()))
         } else {
-            Self::new(status, format!("bad multipart body: {}", e.body_text()))
+            // axum says 500 when the body stream fails, but the only way it fails is the
+            // client's: a body shorter than its Content-Length, a connection closed mid-upload.
+            Self::bad_request(format!(
+                "bad multipart body (truncated, or not multipart/form-data): {}",
+                e.body_text()
+            ))
         }
     }
 }
@@ -184,5 +259,45 @@ impl From<MultipartError> for ApiError {
 impl From<tokio::task::JoinError> for ApiError {
     fn from(e: tokio::task::JoinError) -> Self {
         Self::internal(format!("worker task failed: {e}"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn long_words_and_reasons_are_cut() {
+        let id = "a".repeat(20_000);
+        let r = tidy_reason(&format!(
+            "invalid robot_id {id:?}: is 20000 characters long"
+        ));
+        assert!(
+            r.starts_with(&format!("invalid robot_id \"{}…", "a".repeat(63))),
+            "{r}"
+        );
+        assert!(r.ends_with(" is 20000 characters long"), "{r}");
+        assert!(r.chars().count() < 120, "{r}");
+        let many = "word ".repeat(1000);
+        let r = tidy_reason(&many);
+        assert_eq!(r.chars().count(), MAX_REASON_CHARS + 1);
+        assert!(r.ends_with('…'));
+        assert_eq!(tidy_reason("short reason: ok"), "short reason: ok");
+        // Multi-byte characters are cut on character boundaries.
+        let r = tidy_reason(&"é".repeat(100));
+        assert_eq!(r.chars().count(), MAX_REASON_WORD_CHARS + 1);
+    }
+
+    #[test]
+    fn server_paths_are_scrubbed() {
+        assert_eq!(
+            scrub_paths("cannot access /tmp/x/uploads/21699-12/map.png: denied"),
+            "cannot access <server path>: denied"
+        );
+        assert_eq!(
+            scrub_paths("cannot stage (\"/var/lib/fleet/uploads/1-2\"), giving up"),
+            "cannot stage (\"<server path>\"), giving up"
+        );
+        assert_eq!(scrub_paths("a/b and / stay"), "a/b and / stay");
     }
 }

@@ -19,8 +19,15 @@ use super::error::ApiError;
 use super::state::AppState;
 use crate::fleet::{RobotView, Task, TaskFilter};
 
-/// Interval of the `: keep-alive` comment lines.
+/// Longest interval of the `: keep-alive` comment lines.
 pub const KEEP_ALIVE: Duration = Duration::from_secs(15);
+
+/// The interval of the `: keep-alive` lines: [`KEEP_ALIVE`], or half of `http.idle_timeout_ms`
+/// when that is shorter, so a quiet stream is never closed as idle.
+#[must_use]
+pub fn keep_alive_interval(idle_timeout_ms: u64) -> Duration {
+    KEEP_ALIVE.min(Duration::from_millis(idle_timeout_ms / 2).max(Duration::from_millis(1)))
+}
 
 #[derive(Serialize)]
 struct Snapshot {
@@ -86,6 +93,9 @@ pub async fn events(
             }
         }
     });
-    Ok(Sse::new(first.chain(live).map(Ok))
-        .keep_alive(KeepAlive::new().interval(KEEP_ALIVE).text("keep-alive")))
+    Ok(Sse::new(first.chain(live).map(Ok)).keep_alive(
+        KeepAlive::new()
+            .interval(keep_alive_interval(state.http.idle_timeout_ms))
+            .text("keep-alive"),
+    ))
 }

@@ -25,6 +25,7 @@ use protocol::{MapMeta, MapName, Pose2D};
 use serde::Deserialize;
 
 use super::error::ApiError;
+use super::ranges;
 use super::state::AppState;
 
 /// The most of an oversized body that is read and thrown away before answering 413.
@@ -112,6 +113,11 @@ pub async fn image(
 ) -> Result<Response, ApiError> {
     let Query(q) = query?;
     let name = MapName::new(name)?;
+    if q.version == Some(0) {
+        return Err(ApiError::bad_request(
+            "invalid version = 0: versions start at 1",
+        ));
+    }
     let maps = state.maps.clone();
     let (meta, png) = tokio::task::spawn_blocking(move || {
         let stored = maps.get(&name, q.version)?;
@@ -300,10 +306,40 @@ impl UploadParts {
         Ok(parts)
     }
 
-    /// Stages the files, imports them with map-store's importer and returns the grid; the
-    /// staging folder is removed whatever happens.
+    /// Stages the files, imports them with map-store's importer, checks the map's physical
+    /// ranges ([`ranges::map_geometry`]) and returns the grid; the staging folder is removed
+    /// whatever happens. Errors name the upload's parts, never the staging folder.
     fn import(&self, data_dir: &Path, limits: &ImportLimits) -> Result<Imported, ApiError> {
         let staging = Staging::create(data_dir)?;
+        let imported = self
+            .import_staged(&staging, limits)
+            .map_err(|e| staging.hide(e, |f| self.part_label(f)))?;
+        ranges::map_geometry(&imported.grid)?;
+        Ok(imported)
+    }
+
+    /// What the client calls a staged file: `part \`image\` (plan.pgm)`.
+    fn part_label(&self, staged_file: &str) -> String {
+        let (part, file) = if staged_file == "map.yaml" {
+            ("yaml", self.yaml.as_ref())
+        } else if staged_file.starts_with("map.") {
+            ("image", self.image.as_ref())
+        } else if staged_file.starts_with("picture.") {
+            ("picture", self.picture.as_ref())
+        } else {
+            return "the upload".to_string();
+        };
+        match file {
+            Some(f) => format!("part `{part}` ({})", f.file_name),
+            None => format!("part `{part}`"),
+        }
+    }
+
+    fn import_staged(
+        &self,
+        staging: &Staging,
+        limits: &ImportLimits,
+    ) -> Result<Imported, ApiError> {
         let (mut imported, uploaded_name) = match (&self.yaml, &self.image, &self.picture) {
             (Some(yaml), Some(image), None) => {
                 if self.resolution_m.is_some() {
@@ -370,17 +406,13 @@ impl UploadParts {
                     "missing part `resolution_m` (metres per pixel of the picture)",
                 )
             })?;
-        if resolution_m <= 0.0 {
-            return Err(ApiError::bad_request(format!(
-                "invalid resolution_m = {resolution_m}: must be positive"
-            )));
-        }
+        ranges::resolution("resolution_m", resolution_m)?;
+        let origin_x_m = number("origin_x_m", self.origin_x_m.as_ref())?.unwrap_or(0.0);
+        let origin_y_m = number("origin_y_m", self.origin_y_m.as_ref())?.unwrap_or(0.0);
+        ranges::coordinate("origin_x_m", origin_x_m)?;
+        ranges::coordinate("origin_y_m", origin_y_m)?;
         let mut opts = PictureOptions::new(resolution_m);
-        opts.origin = Pose2D::new(
-            number("origin_x_m", self.origin_x_m.as_ref())?.unwrap_or(0.0),
-            number("origin_y_m", self.origin_y_m.as_ref())?.unwrap_or(0.0),
-            0.0,
-        );
+        opts.origin = Pose2D::new(origin_x_m, origin_y_m, 0.0);
         Ok(opts)
     }
 }
@@ -417,18 +449,18 @@ impl Staging {
         // A folder left by a crashed earlier process with the same pid is stale: start clean.
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).map_err(|e| {
-            ApiError::internal(format!(
-                "cannot create staging folder {}: {e}",
-                dir.display()
-            ))
+            tracing::error!(dir = %dir.display(), error = %e, "cannot create an upload staging folder");
+            ApiError::internal(format!("cannot create the upload staging folder: {e}"))
         })?;
         Ok(Self { dir })
     }
 
     fn write(&self, file: &str, bytes: &[u8]) -> Result<PathBuf, ApiError> {
         let path = self.dir.join(file);
-        std::fs::write(&path, bytes)
-            .map_err(|e| ApiError::internal(format!("cannot stage {}: {e}", path.display())))?;
+        std::fs::write(&path, bytes).map_err(|e| {
+            tracing::error!(path = %path.display(), error = %e, "cannot stage an upload");
+            ApiError::internal(format!("cannot stage the upload's {file}: {e}"))
+        })?;
         Ok(path)
     }
 
@@ -474,6 +506,31 @@ impl Staging {
             .map_err(|e| ApiError::internal(format!("cannot rewrite map YAML: {e}")))?;
         self.write(&image_file, &image.bytes)?;
         self.write("map.yaml", rewritten.as_bytes())
+    }
+}
+
+impl Staging {
+    /// The error with the staging folder's files named by what the client uploaded (`part
+    /// \`image\` (plan.pgm)`) and the folder itself (server path, process id) left out.
+    fn hide(&self, mut e: ApiError, label: impl Fn(&str) -> String) -> ApiError {
+        let dir = self.dir.display().to_string();
+        if !e.reason.contains(&dir) {
+            return e;
+        }
+        let mut files: Vec<(String, String)> = std::fs::read_dir(&self.dir)
+            .into_iter()
+            .flatten()
+            .flatten()
+            .filter_map(|f| f.file_name().into_string().ok())
+            .map(|f| (self.dir.join(&f).display().to_string(), label(&f)))
+            .collect();
+        // Longest first, so a file's path is replaced before the folder's.
+        files.sort_by_key(|(path, _)| std::cmp::Reverse(path.len()));
+        for (path, part) in files {
+            e.reason = e.reason.replace(&path, &part);
+        }
+        e.reason = e.reason.replace(&dir, "the upload");
+        e
     }
 }
 

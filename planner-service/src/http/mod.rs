@@ -5,18 +5,21 @@
 //!   compares the two).
 //! - [`Server`] runs the whole service (map store, Zenoh map server, fleet, HTTP) and stops it
 //!   cleanly; `planner-service serve` and the tests use it.
-//! - [`auth`]: the token; [`error`]: the `{"error","reason"}` answers; [`maps`], [`tasks`],
-//!   [`robots`], [`events`], [`health`], [`metrics`]: the routes; [`openapi`]: the OpenAPI
-//!   document; [`assets`]: the dashboard files.
+//! - [`conn`]: the accept loop (header-read and idle timeouts, connection limit); [`auth`]: the
+//!   token; [`error`]: the `{"error","reason"}` answers; [`ranges`]: the physical ranges of
+//!   numbers; [`maps`], [`tasks`], [`robots`], [`events`], [`health`], [`metrics`]: the routes;
+//!   [`openapi`]: the OpenAPI document; [`assets`]: the dashboard files.
 
 pub mod assets;
 pub mod auth;
+pub mod conn;
 pub mod error;
 pub mod events;
 pub mod health;
 pub mod maps;
 pub mod metrics;
 pub mod openapi;
+pub mod ranges;
 pub mod robots;
 pub mod server;
 pub mod state;

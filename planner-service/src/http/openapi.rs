@@ -3,7 +3,34 @@
 //! router serves.
 
 use axum::Json;
+use protocol::{MapName, RobotId};
 use serde_json::{json, Value};
+
+use super::ranges::{MAX_ABS_YAW_RAD, MAX_COORDINATE_M, MAX_RESOLUTION_M, MIN_RESOLUTION_M};
+
+/// An id of at most `max_len` characters of `[A-Za-z0-9_.-]`, not starting with a dot (the
+/// protocol's rule, which the server checks).
+fn id_schema(max_len: usize) -> Value {
+    json!({
+        "type": "string", "minLength": 1, "maxLength": max_len,
+        "pattern": format!("^[A-Za-z0-9_-][A-Za-z0-9_.-]{{0,{}}}$", max_len - 1)
+    })
+}
+
+/// A map name (51 characters at most, so its id `<name>-<12 hex>` fits 64).
+fn map_name() -> Value {
+    id_schema(MapName::MAX_LEN)
+}
+
+/// A robot or task id.
+fn id_pattern() -> Value {
+    id_schema(RobotId::MAX_LEN)
+}
+
+/// A map-frame coordinate in metres, within the accepted range.
+fn coordinate() -> Value {
+    json!({ "type": "number", "minimum": -MAX_COORDINATE_M, "maximum": MAX_COORDINATE_M })
+}
 
 fn r(name: &str) -> Value {
     json!({ "$ref": format!("#/components/schemas/{name}") })
@@ -30,9 +57,8 @@ fn png(description: &str) -> Value {
     })
 }
 
-fn path_param(name: &str, description: &str) -> Value {
-    json!({ "name": name, "in": "path", "required": true, "description": description,
-            "schema": { "type": "string", "pattern": "^[A-Za-z0-9_-][A-Za-z0-9_.-]{0,63}$" } })
+fn path_param(name: &str, description: &str, schema: Value) -> Value {
+    json!({ "name": name, "in": "path", "required": true, "description": description, "schema": schema })
 }
 
 fn query_param(name: &str, description: &str, schema: Value) -> Value {
@@ -48,20 +74,21 @@ fn upload_body(name_required: bool) -> Value {
             "description": "Either `yaml` + `image` (a ROS map_server map) or `picture` + `resolution_m` (a floor-plan picture).",
             "required": required,
             "properties": {
-                "name": { "type": "string", "description": "Map name: 1-51 characters of [A-Za-z0-9_.-], not starting with a dot." },
+                "name": with_description(map_name(), "Map name: 1-51 characters of [A-Za-z0-9_.-], not starting with a dot."),
                 "yaml": { "type": "string", "format": "binary", "description": "ROS map_server YAML; its `image` entry is replaced by the `image` part." },
                 "image": { "type": "string", "format": "binary", "description": "The map image (PGM, PNG, BMP, JPEG)." },
                 "picture": { "type": "string", "format": "binary", "description": "A floor-plan picture (PNG, JPEG, BMP, PGM)." },
-                "resolution_m": { "type": "string", "description": "Metres per pixel of the picture (a positive number)." },
-                "origin_x_m": { "type": "string", "description": "Map-frame x of the picture's lower-left corner (default 0)." },
-                "origin_y_m": { "type": "string", "description": "Map-frame y of the picture's lower-left corner (default 0)." }
+                "resolution_m": { "type": "number", "minimum": MIN_RESOLUTION_M, "maximum": MAX_RESOLUTION_M, "description": "Metres per pixel of the picture." },
+                "origin_x_m": with_description(coordinate(), "Map-frame x of the picture's lower-left corner (default 0)."),
+                "origin_y_m": with_description(coordinate(), "Map-frame y of the picture's lower-left corner (default 0).")
             }
         } } }
     })
 }
 
-fn id_pattern() -> Value {
-    json!({ "type": "string", "pattern": "^[A-Za-z0-9_-][A-Za-z0-9_.-]{0,63}$" })
+fn with_description(mut schema: Value, description: &str) -> Value {
+    schema["description"] = json!(description);
+    schema
 }
 
 fn schemas() -> Value {
@@ -71,7 +98,7 @@ fn schemas() -> Value {
         "Error": {
             "type": "object", "required": ["error", "reason"],
             "properties": {
-                "error": { "type": "string", "enum": ["bad_request", "unauthorized", "not_found", "method_not_allowed", "conflict", "too_large", "internal"] },
+                "error": { "type": "string", "enum": ["bad_request", "unauthorized", "not_found", "method_not_allowed", "conflict", "too_large", "unsupported_media_type", "unavailable", "internal"] },
                 "reason": { "type": "string", "description": "A sentence naming the field and value." }
             }
         },
@@ -100,13 +127,23 @@ fn schemas() -> Value {
         },
         "Goal": {
             "type": "object", "required": ["x_m", "y_m"], "additionalProperties": false,
-            "properties": { "x_m": num, "y_m": num, "yaw_rad": { "type": ["number", "null"], "description": "Absent or null: any heading." } }
+            "properties": {
+                "x_m": coordinate(), "y_m": coordinate(),
+                "yaw_rad": {
+                    "type": ["number", "null"], "minimum": -MAX_ABS_YAW_RAD, "maximum": MAX_ABS_YAW_RAD,
+                    "description": "Absent or null: any heading."
+                }
+            }
         },
         "NewTask": {
             "type": "object", "required": ["map", "goals"], "additionalProperties": false,
             "properties": {
-                "map": { "type": "string" },
-                "robot_id": { "type": ["string", "null"], "description": "Absent: the nearest idle online robot on the map." },
+                "map": map_name(),
+                "robot_id": {
+                    "type": ["string", "null"], "minLength": 1, "maxLength": RobotId::MAX_LEN,
+                    "pattern": id_pattern()["pattern"],
+                    "description": "Absent or null: the nearest idle online robot on the map."
+                },
                 "goals": { "type": "array", "minItems": 1, "maxItems": 64, "items": r("Goal") }
             }
         },
@@ -217,15 +254,15 @@ fn schemas() -> Value {
 pub fn document() -> Value {
     let bearer = json!([{ "bearer": [] }]);
     let read_security = json!([{}, { "bearer": [] }, { "access_token": [] }]);
-    let name = path_param("name", "Map name.");
-    let task_id = path_param("id", "Task id.");
-    let robot_id = path_param("id", "Robot id.");
+    let name = path_param("name", "Map name.", map_name());
+    let task_id = path_param("id", "Task id.", id_pattern());
+    let robot_id = path_param("id", "Robot id.", id_pattern());
     json!({
         "openapi": "3.1.0",
         "info": {
             "title": "Intention fleet planner service",
             "version": env!("CARGO_PKG_VERSION"),
-            "description": "Floor plans, delivery tasks, robots and the live event stream of the fleet (docs/api.md). Units in field names, angles in radians, poses in the map frame (REP-103). Mutating routes need `Authorization: Bearer <token>`; reads too when the service runs with `[http] protect_reads` (then also as `access_token=`)."
+            "description": "Floor plans, delivery tasks, robots and the live event stream of the fleet (docs/api.md). Units in field names, angles in radians, poses in the map frame (REP-103). Mutating routes need `Authorization: Bearer <token>` (the scheme in any case); reads too when the service runs with `[http] protect_reads` (then also as `access_token=`). Numbers have physical ranges (coordinates within ±100 km, angles within ±2π rad, map resolutions 0.001-10 m per cell): beyond them a request is refused with 400 and nothing is stored. Connections: a request head must arrive within `[http] header_read_timeout_ms`, a connection on which nothing moves for `[http] idle_timeout_ms` is closed, and past `[http] max_connections` a new connection is answered 503 with `Retry-After`."
         },
         "security": read_security,
         "paths": {
@@ -301,7 +338,7 @@ pub fn document() -> Value {
             } },
             "/api/v1/maps/{name}/image": { "get": {
                 "summary": "The occupancy grid as PNG (as preview).",
-                "parameters": [name, query_param("version", "Version (default: latest).", json!({ "type": "integer", "minimum": 1 }))],
+                "parameters": [name, query_param("version", "Version (default: latest).", json!({ "type": "integer", "minimum": 1, "maximum": u32::MAX }))],
                 "responses": { "200": png("Free white, occupied black, unknown grey; top = +y; x-map-* headers as preview."), "400": err("BadRequest"), "401": err("Unauthorized"), "404": err("NotFound") }
             } },
             "/api/v1/tasks": {
@@ -310,7 +347,7 @@ pub fn document() -> Value {
                     "parameters": [
                         query_param("state", "Only tasks in this state.", json!({ "type": "string", "enum": ["queued", "assigned", "active", "paused", "completed", "failed", "cancelled"] })),
                         query_param("robot_id", "Only tasks of this robot.", id_pattern()),
-                        query_param("map", "Only tasks on this map.", id_pattern()),
+                        query_param("map", "Only tasks on this map.", map_name()),
                         query_param("limit", "At most this many (default 100).", json!({ "type": "integer", "minimum": 1, "maximum": 1000 }))
                     ],
                     "responses": { "200": ok("Tasks.", json!({ "type": "array", "items": r("Task") })), "400": err("BadRequest"), "401": err("Unauthorized") }

@@ -4,7 +4,9 @@
 //!
 //! [`Server::start`] binds (port 0 works) and returns at once with the bound address, so tests
 //! and the demo start it in-process; [`Server::stop`] shuts HTTP down gracefully (event
-//! streams end), then the fleet, the map server and the Zenoh session.
+//! streams end), then the fleet, the map server and the Zenoh session. HTTP connections are
+//! served by [`super::conn`] with the header-read and idle timeouts and the connection limit of
+//! `[http]`.
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -16,6 +18,7 @@ use tokio::sync::watch;
 use tokio::task::JoinHandle;
 
 use super::auth::{resolve_token, TokenError, TokenSource};
+use super::conn::ConnLimits;
 use super::metrics::HttpMetrics;
 use super::state::AppState;
 use crate::config::ServiceConfig;
@@ -141,14 +144,8 @@ impl Server {
             shutdown: shutdown_rx.clone(),
         };
         let app = super::router(state);
-        let mut stop_rx = shutdown_rx;
-        let http_task = tokio::spawn(async move {
-            axum::serve(listener, app)
-                .with_graceful_shutdown(async move {
-                    let _ = stop_rx.wait_for(|stop| *stop).await;
-                })
-                .await
-        });
+        let limits = ConnLimits::of(&cfg.http);
+        let http_task = tokio::spawn(super::conn::serve(listener, app, limits, shutdown_rx));
         tracing::info!(%addr, site = %cfg.zenoh.site, "planner service started");
         Ok(Self {
             addr,

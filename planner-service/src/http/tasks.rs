@@ -9,15 +9,18 @@ use protocol::{MapName, RobotId, TaskId};
 use serde::Deserialize;
 
 use super::error::ApiError;
+use super::ranges;
 use super::state::AppState;
 use crate::fleet::{NewTask, Task, TaskFilter, TaskStateKind};
 
-/// `POST /api/v1/tasks` → `201 Task`.
+/// `POST /api/v1/tasks` → `201 Task`; goals outside the physical ranges of [`ranges`] are
+/// refused before the fleet sees them.
 pub async fn create(
     State(state): State<AppState>,
     body: Result<Json<NewTask>, JsonRejection>,
 ) -> Result<(StatusCode, Json<Task>), ApiError> {
     let Json(req) = body?;
+    ranges::goals(&req.goals)?;
     let fleet = state.fleet.clone();
     // Validation may build the map's planning grid (inflation, heuristic): not on the runtime.
     let task = tokio::task::spawn_blocking(move || fleet.create_task(req)).await??;
