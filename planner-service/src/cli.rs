@@ -45,6 +45,27 @@ pub enum Command {
     Demo(DemoArgs),
     /// Benchmark the replanning loop: N simulated robots sending poses at a rate over Zenoh.
     BenchFleet(BenchFleetArgs),
+    /// Benchmark task listing and the live-stream snapshot at growing numbers of stored tasks.
+    BenchStore(BenchStoreArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct BenchStoreArgs {
+    /// Stored tasks, one fresh database each.
+    #[arg(long, value_delimiter = ',', default_value = "1000,100000")]
+    pub sizes: Vec<usize>,
+    /// Of them, tasks that have not ended.
+    #[arg(long, default_value_t = 50)]
+    pub live: usize,
+    /// Timed runs of each indexed read.
+    #[arg(long, default_value_t = 200)]
+    pub reps: usize,
+    /// Timed runs of each full-scan read (the baseline before the index; 0: none).
+    #[arg(long, default_value_t = 5)]
+    pub baseline_reps: usize,
+    /// Write the results as JSON here.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]
@@ -221,6 +242,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<()> {
         Command::Serve(args) => serve(&args, out),
         Command::Demo(args) => demo(args, out),
         Command::BenchFleet(args) => bench_fleet(&args, out),
+        Command::BenchStore(args) => bench_store(&args, out),
     }
 }
 
@@ -276,6 +298,22 @@ fn bench_fleet(args: &BenchFleetArgs, out: &mut dyn Write) -> anyhow::Result<()>
     let report = runtime()?.block_on(crate::fleet_bench::run_fleet_bench(&opts, &bar))?;
     bar.finish_and_clear();
     write!(out, "{}", crate::fleet_bench::markdown(&report))?;
+    if let Some(path) = &args.out {
+        std::fs::write(path, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    Ok(())
+}
+
+fn bench_store(args: &BenchStoreArgs, out: &mut dyn Write) -> anyhow::Result<()> {
+    let opts = crate::store_bench::StoreBenchOptions {
+        sizes: args.sizes.clone(),
+        live: args.live,
+        reps: args.reps.max(1),
+        baseline_reps: args.baseline_reps,
+    };
+    let report = crate::store_bench::run_store_bench(&opts, &mut |msg| eprintln!("{msg}"))?;
+    write!(out, "{}", crate::store_bench::markdown(&report))?;
     if let Some(path) = &args.out {
         std::fs::write(path, serde_json::to_string_pretty(&report)?)
             .with_context(|| format!("cannot write {}", path.display()))?;

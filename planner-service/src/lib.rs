@@ -8,7 +8,8 @@
 //! - [`http`]: the HTTP API (docs/api.md) and the running service behind `serve`.
 //! - [`demo`]: the fleet demo (service + simulator + agents as processes); [`launch`]: the
 //!   launcher of the simulator and the agents that the demo and the end-to-end tests share;
-//!   [`fleet_bench`]: the replanning-loop benchmark.
+//!   [`fleet_bench`]: the replanning-loop benchmark; [`store_bench`]: the task-store (list and
+//!   snapshot) benchmark.
 //! - [`cli`], [`bench`]: the `planner-service` command line and its planner benchmark.
 
 pub mod bench;
@@ -19,3 +20,4 @@ pub mod fleet;
 pub mod fleet_bench;
 pub mod http;
 pub mod launch;
+pub mod store_bench;

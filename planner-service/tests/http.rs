@@ -794,6 +794,13 @@ async fn tasks_are_created_validated_listed_and_cancelled() {
     )
     .await;
     assert_eq!(list.as_array().unwrap().len(), 1);
+    // One task: a page of one is the last page (no Next-Cursor).
+    let resp = c
+        .get(format!("{url}/api/v1/tasks?limit=1"))
+        .send()
+        .await
+        .unwrap();
+    assert!(resp.headers().get("next-cursor").is_none());
     let list = json(
         c.get(format!("{url}/api/v1/tasks?state=active"))
             .send()
@@ -802,12 +809,17 @@ async fn tasks_are_created_validated_listed_and_cancelled() {
     )
     .await;
     assert_eq!(list.as_array().unwrap().len(), 0);
+    let long_cursor = format!("cursor={}", "ab".repeat(500));
     for (q, needle) in [
         ("state=running", "running"),
         ("limit=0", "limit"),
         ("limit=5000", "limit"),
         ("robot_id=a%2Fb", "a/b"),
         ("colour=red", "colour"),
+        ("cursor=zz", "cursor"),
+        ("cursor=00ff", "cursor"),
+        ("cursor=0000000000000001742f", "cursor"),
+        (long_cursor.as_str(), "cursor"),
     ] {
         let resp = c
             .get(format!("{url}/api/v1/tasks?{q}"))
@@ -980,12 +992,79 @@ async fn event_stream_sends_a_snapshot_then_task_events() {
     })
     .await;
 
-    // A new subscriber's snapshot holds the task; stopping the server ends open streams.
+    // A new subscriber's snapshot holds the live tasks only (not the cancelled one, however
+    // recent); stopping the server ends open streams.
+    let live = json(
+        c.post(format!("{url}/api/v1/tasks"))
+            .bearer_auth(TOKEN)
+            .json(&serde_json::json!({"map": "depot", "goals": [{"x_m": fx, "y_m": fy}]}))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
     let resp = c.get(format!("{url}/api/v1/events")).send().await.unwrap();
     let mut stream2 = resp.bytes_stream();
     let mut buf2 = String::new();
     let snap = next_event(&mut stream2, &mut buf2, "snapshot", |_| true).await;
-    assert_eq!(snap["tasks"][0]["id"], id);
+    let ids: Vec<_> = snap["tasks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t["id"].clone())
+        .collect();
+    assert_eq!(ids, vec![live["id"].clone()]);
+    tokio::time::timeout(Duration::from_secs(10), server.stop())
+        .await
+        .unwrap()
+        .unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn task_pages_follow_the_next_cursor_to_the_end() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = start(dir.path(), config()).await;
+    let url = server.url();
+    let c = client();
+    upload_depot(&c, &url).await;
+    let ((fx, fy), _) = depot_points();
+    let mut created = Vec::new();
+    for _ in 0..5 {
+        let task = json(
+            c.post(format!("{url}/api/v1/tasks"))
+                .bearer_auth(TOKEN)
+                .json(&serde_json::json!({"map": "depot", "goals": [{"x_m": fx, "y_m": fy}]}))
+                .send()
+                .await
+                .unwrap(),
+        )
+        .await;
+        created.push(task["id"].clone());
+    }
+    created.reverse();
+    let mut paged = Vec::new();
+    let mut query = "limit=2&map=depot".to_string();
+    let mut pages = 0;
+    loop {
+        let resp = c
+            .get(format!("{url}/api/v1/tasks?{query}"))
+            .send()
+            .await
+            .unwrap();
+        let next = resp
+            .headers()
+            .get("next-cursor")
+            .map(|v| v.to_str().unwrap().to_string());
+        let page = json(resp).await;
+        pages += 1;
+        paged.extend(page.as_array().unwrap().iter().map(|t| t["id"].clone()));
+        match next {
+            Some(cursor) => query = format!("limit=2&map=depot&cursor={cursor}"),
+            None => break,
+        }
+    }
+    assert_eq!(pages, 3);
+    assert_eq!(paged, created);
     tokio::time::timeout(Duration::from_secs(10), server.stop())
         .await
         .unwrap()
@@ -1506,6 +1585,9 @@ fn openapi_document_states_the_bounds_the_server_checks() {
         assert_eq!(s["maxLength"], max, "{p}");
         assert!(s["pattern"].as_str().unwrap().starts_with('^'), "{p}");
     }
+    let cursor = &doc["paths"]["/api/v1/tasks"]["get"]["parameters"][4];
+    assert_eq!(cursor["name"], "cursor");
+    assert_eq!(cursor["schema"]["maxLength"], 144);
     let version = &doc["paths"]["/api/v1/maps/{name}/image"]["get"]["parameters"][1];
     assert_eq!(version["name"], "version");
     assert_eq!(version["schema"]["minimum"], 1);

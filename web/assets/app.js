@@ -12,6 +12,7 @@ const TRAIL_WINDOW_MS = 60_000;
 const TRAIL_MAX_POINTS = 900;
 const LPE_REFRESH_MS = 600; // <= 2 Hz, as the service samples it
 const CAMERA_REFRESH_MS = 1200; // <= 1 Hz: camera frames are large
+const RECENT_TASKS = 100; // finished tasks listed after a (re)connect
 const RECONNECT_MIN_MS = 1000;
 const RECONNECT_MAX_MS = 15_000;
 const ROBOT_RADIUS_M = 0.25;
@@ -414,6 +415,8 @@ function handleEvent(kind, raw) {
       }
       for (const id of [...state.robots.keys()]) if (!seen.has(id)) state.robots.delete(id);
       for (const task of data.tasks || []) upsertTask(task);
+      // The snapshot carries live tasks only; the recent history comes from the task list.
+      loadRecentTasks();
       if (!state.mapChosen) {
         // Until the operator picks a map, show the one the robots are on.
         const robotMap = (data.robots || []).find((r) => r.online && r.map)?.map?.name;
@@ -450,6 +453,17 @@ function handleEvent(kind, raw) {
   }
   scheduleRender();
   markDirty();
+}
+
+/** The newest tasks of any state (finished ones too), for the task list after a (re)connect. */
+async function loadRecentTasks() {
+  try {
+    const tasks = await getJson(`${API}/tasks?limit=${RECENT_TASKS}`);
+    for (const task of tasks || []) upsertTask(task);
+    scheduleRender();
+  } catch {
+    // reported by request(); the live tasks from the snapshot are shown either way
+  }
 }
 
 let eventSource = null;

@@ -305,5 +305,12 @@ test('the clicked task reaches completed', { timeout: TASK_TIMEOUT_MS + 30_000 }
   await screenshot(page, '08-task-ended');
   assert.equal(state, 'completed', `task ended ${state}: ${await taskRow(id).innerText()}`);
   assert.match(await taskRow(id).innerText(), /completed · 2\/2/);
+  // After a reload the event snapshot carries live tasks only; the finished one comes back from
+  // the task list.
+  await page.reload();
+  await waitFor('the finished task listed after a reload', async () => (await taskRowState(id).catch(() => null)) === 'completed', {
+    timeoutMs: 15_000,
+    intervalMs: 250,
+  });
   assert.deepEqual(pageErrors, [], 'uncaught errors in the page');
 });

@@ -29,6 +29,15 @@ pub struct FleetConfig {
     /// Spacing of the path sent in an intention (the planner's own is finer); turns in place
     /// are kept whatever the spacing.
     pub intention_path_spacing_m: f64,
+    /// Finished tasks (completed, failed, cancelled) that ended longer ago than this are
+    /// pruned (exported first to `<data-dir>/tasks-export.jsonl`); 0 keeps them whatever
+    /// their age.
+    pub retain_finished_s: u64,
+    /// At most this many finished tasks are kept, the newest; older ones are pruned (exported
+    /// first); 0 keeps any number.
+    pub retain_finished_max: u64,
+    /// How often finished tasks are swept.
+    pub retention_sweep_interval_s: u64,
 }
 
 impl Default for FleetConfig {
@@ -45,6 +54,9 @@ impl Default for FleetConfig {
             event_buffer: 1024,
             max_goals: 64,
             intention_path_spacing_m: 0.2,
+            retain_finished_s: 30 * 24 * 3600,
+            retain_finished_max: 100_000,
+            retention_sweep_interval_s: 60,
         }
     }
 }
@@ -69,6 +81,17 @@ impl InvalidFleetConfig {
 }
 
 impl FleetConfig {
+    /// The retention policy of the task store (0 is no bound).
+    #[must_use]
+    pub fn retention(&self) -> super::store::Retention {
+        super::store::Retention {
+            max_age_ns: (self.retain_finished_s > 0)
+                .then(|| self.retain_finished_s.saturating_mul(1_000_000_000)),
+            max_count: (self.retain_finished_max > 0)
+                .then(|| usize::try_from(self.retain_finished_max).unwrap_or(usize::MAX)),
+        }
+    }
+
     /// Checks every value, naming the first bad one.
     ///
     /// # Errors
@@ -98,6 +121,10 @@ impl FleetConfig {
             ("max_plan_failures", u64::from(self.max_plan_failures)),
             ("event_buffer", self.event_buffer as u64),
             ("max_goals", self.max_goals as u64),
+            (
+                "retention_sweep_interval_s",
+                self.retention_sweep_interval_s,
+            ),
         ];
         match counts.into_iter().find(|(_, v)| *v == 0) {
             Some((field, _)) => Err(InvalidFleetConfig::new(field, 0, "must be positive")),
@@ -138,6 +165,30 @@ mod tests {
         assert_eq!(
             bad.validate().unwrap_err().field,
             "intention_path_spacing_m"
+        );
+        let bad = FleetConfig {
+            retention_sweep_interval_s: 0,
+            ..FleetConfig::default()
+        };
+        assert_eq!(
+            bad.validate().unwrap_err().field,
+            "retention_sweep_interval_s"
+        );
+    }
+
+    #[test]
+    fn retention_defaults_to_30_days_and_100000_and_zero_is_no_bound() {
+        let r = FleetConfig::default().retention();
+        assert_eq!(r.max_age_ns, Some(30 * 24 * 3600 * 1_000_000_000));
+        assert_eq!(r.max_count, Some(100_000));
+        let unbounded = FleetConfig {
+            retain_finished_s: 0,
+            retain_finished_max: 0,
+            ..FleetConfig::default()
+        };
+        assert_eq!(
+            unbounded.retention(),
+            super::super::store::Retention::default()
         );
     }
 }

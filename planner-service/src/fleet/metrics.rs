@@ -58,6 +58,18 @@ impl FleetMetrics {
         self.tasks[to as usize].fetch_add(1, Ordering::Relaxed);
     }
 
+    /// Counts `n` tasks in `state` that were already stored (at start).
+    pub fn tasks_added(&self, state: TaskStateKind, n: usize) {
+        self.tasks[state as usize]
+            .fetch_add(i64::try_from(n).unwrap_or(i64::MAX), Ordering::Relaxed);
+    }
+
+    /// Takes `n` pruned tasks in `state` off the gauge.
+    pub fn tasks_removed(&self, state: TaskStateKind, n: usize) {
+        self.tasks[state as usize]
+            .fetch_sub(i64::try_from(n).unwrap_or(i64::MAX), Ordering::Relaxed);
+    }
+
     /// Sets the online/offline robot gauges.
     pub fn set_robots(&self, online: usize, offline: usize) {
         self.robots_online

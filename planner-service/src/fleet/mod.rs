@@ -53,10 +53,10 @@ use crate::config::ServiceConfig;
 pub use self::config::{FleetConfig, InvalidFleetConfig};
 pub use self::error::{ErrorKind, FleetError};
 pub use self::metrics::FleetMetrics;
-pub use self::store::{StoreError, TaskStore};
+pub use self::store::{Retention, StoreError, SweepReport, TaskStore};
 pub use self::types::{
-    FleetEvent, Goal, HistoryEntry, IntentionView, NewTask, PoseView, RobotView, StatusView, Task,
-    TaskFilter, TaskStateKind,
+    Cursor, FleetEvent, Goal, HistoryEntry, IntentionView, NewTask, PoseView, RobotView,
+    StatusView, Task, TaskFilter, TaskPage, TaskStateKind,
 };
 
 /// When something happens: the monotonic instant (timers) and the wall clock (stored stamps).
@@ -156,8 +156,8 @@ impl Fleet {
             .map_err(|e| FleetError::Config(e.to_string()))?;
         let store = Arc::new(TaskStore::open(data_dir)?);
         let metrics = FleetMetrics::default();
-        for task in store.all()? {
-            metrics.task_moved(None, task.kind());
+        for (state, count) in TaskStateKind::ALL.into_iter().zip(store.count_by_state()?) {
+            metrics.tasks_added(state, count);
         }
         let (core, resumed) = Core::open(Arc::clone(&store), config.fleet.clone(), Now::read())?;
         let (events, _) = broadcast::channel(config.fleet.event_buffer);
@@ -208,10 +208,15 @@ impl Fleet {
             Arc::downgrade(&fleet),
             fleet.shutdown.subscribe(),
         ));
+        let sweeper = tokio::spawn(retention_sweeper(
+            Arc::downgrade(&fleet),
+            fleet.shutdown.subscribe(),
+        ));
         {
             let mut io = lock(&fleet.io);
             io.subscribers = subscribers;
             io.tasks.push(watchdog);
+            io.tasks.push(sweeper);
         }
         tracing::info!(site = %fleet.site, "fleet core running");
         Ok(fleet)
@@ -319,6 +324,35 @@ impl Fleet {
     /// A storage error.
     pub fn tasks(&self, filter: &TaskFilter) -> Result<Vec<Task>, FleetError> {
         Ok(self.store.list(filter)?)
+    }
+
+    /// One page of the tasks matching `filter`, newest first, and where the next starts.
+    ///
+    /// # Errors
+    /// A storage error.
+    pub fn task_page(&self, filter: &TaskFilter) -> Result<TaskPage, FleetError> {
+        Ok(self.store.list_page(filter)?)
+    }
+
+    /// The newest `limit` tasks that have not ended, newest first.
+    ///
+    /// # Errors
+    /// A storage error.
+    pub fn live_tasks(&self, limit: usize) -> Result<Vec<Task>, FleetError> {
+        Ok(self.store.live(limit)?)
+    }
+
+    /// Prunes the finished tasks past `[fleet]`'s retention (exported first) and takes them
+    /// off the task gauges.
+    ///
+    /// # Errors
+    /// A storage or export error; what was pruned before it stays pruned and counted.
+    pub fn sweep_finished(&self) -> Result<SweepReport, FleetError> {
+        let report = self.store.sweep(&self.config.fleet.retention(), now_ns())?;
+        for (state, count) in TaskStateKind::ALL.into_iter().zip(report.pruned_by_state) {
+            self.metrics.tasks_removed(state, count);
+        }
+        Ok(report)
     }
 
     // ----- commands ------------------------------------------------------------------------
@@ -454,6 +488,29 @@ impl Fleet {
     fn header(&self) -> Header {
         let seq = self.seq.fetch_add(1, Ordering::Relaxed);
         Header::new(seq, now_ns())
+    }
+}
+
+/// Sweeps finished tasks every `[fleet] retention_sweep_interval_s` until shutdown.
+async fn retention_sweeper(fleet: Weak<Fleet>, mut shutdown: watch::Receiver<bool>) {
+    loop {
+        let Some(interval) = fleet
+            .upgrade()
+            .map(|f| Duration::from_secs(f.config.fleet.retention_sweep_interval_s))
+        else {
+            return;
+        };
+        tokio::select! {
+            _ = shutdown.wait_for(|stop| *stop) => return,
+            () = tokio::time::sleep(interval) => {}
+        }
+        let Some(f) = fleet.upgrade() else { return };
+        match tokio::task::spawn_blocking(move || f.sweep_finished()).await {
+            Ok(Ok(r)) if r.pruned > 0 => tracing::info!(pruned = r.pruned, "finished tasks pruned"),
+            Ok(Ok(_)) => {}
+            Ok(Err(e)) => tracing::warn!("cannot prune finished tasks: {e}"),
+            Err(e) => tracing::warn!("task sweep stopped: {e}"),
+        }
     }
 }
 

@@ -143,13 +143,65 @@ impl FromStr for TaskStateKind {
     }
 }
 
-/// Which tasks to list; `limit` defaults to [`TaskFilter::DEFAULT_LIMIT`].
+/// Which tasks to list; `limit` defaults to [`TaskFilter::DEFAULT_LIMIT`]; `cursor` (from the
+/// previous page) starts the listing after that task.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct TaskFilter {
     pub state: Option<TaskStateKind>,
     pub robot_id: Option<RobotId>,
     pub map: Option<MapName>,
     pub limit: Option<usize>,
+    pub cursor: Option<Cursor>,
+}
+
+/// A position in the newest-first task order: the (creation time, id) of the last task of a
+/// page. Its text form is opaque to clients (hex).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Cursor {
+    pub created_ns: u64,
+    pub id: TaskId,
+}
+
+impl Cursor {
+    /// Longest text form: 8 bytes of time and the longest id, in hex.
+    pub const MAX_TEXT_LEN: usize = 2 * (8 + TaskId::MAX_LEN);
+
+    /// The cursor just past `task`.
+    #[must_use]
+    pub fn after(task: &Task) -> Self {
+        Self {
+            created_ns: task.created_ns,
+            id: task.id.clone(),
+        }
+    }
+
+    /// The opaque text form handed to clients.
+    #[must_use]
+    pub fn encode(&self) -> String {
+        let mut bytes = self.created_ns.to_be_bytes().to_vec();
+        bytes.extend_from_slice(self.id.as_str().as_bytes());
+        hex::encode(bytes)
+    }
+
+    /// Parses [`Cursor::encode`]'s form; `None` for anything else.
+    #[must_use]
+    pub fn decode(text: &str) -> Option<Self> {
+        if text.len() > Self::MAX_TEXT_LEN {
+            return None;
+        }
+        let bytes = hex::decode(text).ok()?;
+        let (time, id) = bytes.split_at_checked(8)?;
+        let created_ns = u64::from_be_bytes(time.try_into().ok()?);
+        let id = TaskId::new(String::from_utf8(id.to_vec()).ok()?).ok()?;
+        Some(Self { created_ns, id })
+    }
+}
+
+/// One page of a task listing: the tasks, and where the next page starts (`None` at the end).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TaskPage {
+    pub tasks: Vec<Task>,
+    pub next_cursor: Option<Cursor>,
 }
 
 impl TaskFilter {

@@ -19,6 +19,9 @@ use super::error::ApiError;
 use super::state::AppState;
 use crate::fleet::{RobotView, Task, TaskFilter};
 
+/// Most tasks in a snapshot: the newest that have not ended.
+pub const SNAPSHOT_TASKS: usize = TaskFilter::MAX_LIMIT;
+
 /// Longest interval of the `: keep-alive` comment lines.
 pub const KEEP_ALIVE: Duration = Duration::from_secs(15);
 
@@ -46,14 +49,14 @@ fn json_event(name: &str, data: &impl Serialize) -> Event {
         })
 }
 
-/// The robots and the newest tasks, read off the async workers (the task list is a database
-/// read).
+/// The robots and the live tasks (not ended; the newest [`SNAPSHOT_TASKS`]), read off the async
+/// workers (the task list is a database read, off the state index: its cost does not grow with
+/// the finished tasks stored).
 async fn snapshot(fleet: std::sync::Arc<crate::fleet::Fleet>) -> Result<Snapshot, ApiError> {
     tokio::task::spawn_blocking(move || {
         Ok::<_, ApiError>(Snapshot {
             robots: fleet.robots(),
-            // The newest tasks, whatever their state: active ones and recent history.
-            tasks: fleet.tasks(&TaskFilter::default())?,
+            tasks: fleet.live_tasks(SNAPSHOT_TASKS)?,
         })
     })
     .await?

@@ -28,7 +28,7 @@ pub mod tasks;
 use std::collections::BTreeMap;
 
 use axum::extract::DefaultBodyLimit;
-use axum::http::{HeaderValue, Method, StatusCode};
+use axum::http::{HeaderName, HeaderValue, Method, StatusCode};
 use axum::middleware;
 use axum::routing::{get, post, MethodRouter};
 use axum::Router;
@@ -186,7 +186,8 @@ pub fn router(state: AppState) -> Router {
             CorsLayer::new()
                 .allow_origin(origins)
                 .allow_methods([Method::GET, Method::POST, Method::PUT, Method::DELETE])
-                .allow_headers(Any),
+                .allow_headers(Any)
+                .expose_headers([HeaderName::from_static(tasks::NEXT_CURSOR)]),
         );
     }
     router

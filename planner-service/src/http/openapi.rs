@@ -238,7 +238,7 @@ fn schemas() -> Value {
             "description": "SSE event `snapshot`, sent first.",
             "properties": {
                 "robots": { "type": "array", "items": r("Robot") },
-                "tasks": { "type": "array", "items": r("Task"), "description": "The newest 100 tasks, any state." }
+                "tasks": { "type": "array", "items": r("Task"), "description": "The tasks that have not ended (queued, assigned, active, paused), newest first, at most 1000. Finished ones: `GET /api/v1/tasks`." }
             }
         },
         "IntentionEvent": {
@@ -348,9 +348,14 @@ pub fn document() -> Value {
                         query_param("state", "Only tasks in this state.", json!({ "type": "string", "enum": ["queued", "assigned", "active", "paused", "completed", "failed", "cancelled"] })),
                         query_param("robot_id", "Only tasks of this robot.", id_pattern()),
                         query_param("map", "Only tasks on this map.", map_name()),
-                        query_param("limit", "At most this many (default 100).", json!({ "type": "integer", "minimum": 1, "maximum": 1000 }))
+                        query_param("limit", "At most this many (default 100).", json!({ "type": "integer", "minimum": 1, "maximum": 1000 })),
+                        query_param("cursor", "Start after this task: the `Next-Cursor` header of the previous page (opaque; other values are a 400). Combine with the same filters.", json!({ "type": "string", "pattern": "^[0-9a-f]+$", "minLength": 18, "maxLength": crate::fleet::Cursor::MAX_TEXT_LEN }))
                     ],
-                    "responses": { "200": ok("Tasks.", json!({ "type": "array", "items": r("Task") })), "400": err("BadRequest"), "401": err("Unauthorized") }
+                    "responses": { "200": {
+                        "description": "Tasks, newest first (by creation time, then id). Each page costs about `limit` lookups, whatever the number of tasks stored.",
+                        "headers": { "Next-Cursor": { "description": "Present when more tasks match: pass it as `cursor` for the next page. Absent on the last page.", "schema": { "type": "string" } } },
+                        "content": { "application/json": { "schema": { "type": "array", "items": r("Task") } } }
+                    }, "400": err("BadRequest"), "401": err("Unauthorized") }
                 },
                 "post": {
                     "summary": "Create a delivery task (1-64 goals on the map, in free space).",

@@ -1,9 +1,9 @@
-//! Delivery-task routes: create, list (filtered, newest first), get, cancel. Validation and
-//! storage are the fleet's; this module maps HTTP onto it.
+//! Delivery-task routes: create, list (filtered, newest first, paged by cursor), get, cancel.
+//! Validation and storage are the fleet's; this module maps HTTP onto it.
 
 use axum::extract::rejection::{JsonRejection, QueryRejection};
 use axum::extract::{Path as UrlPath, Query, State};
-use axum::http::StatusCode;
+use axum::http::{HeaderMap, HeaderName, HeaderValue, StatusCode};
 use axum::Json;
 use protocol::{MapName, RobotId, TaskId};
 use serde::Deserialize;
@@ -11,7 +11,11 @@ use serde::Deserialize;
 use super::error::ApiError;
 use super::ranges;
 use super::state::AppState;
-use crate::fleet::{NewTask, Task, TaskFilter, TaskStateKind};
+use crate::fleet::{Cursor, NewTask, Task, TaskFilter, TaskStateKind};
+
+/// The response header of `GET /api/v1/tasks` that carries the cursor of the next page
+/// (absent on the last page). The body stays a plain array, as before cursors.
+pub const NEXT_CURSOR: &str = "next-cursor";
 
 /// `POST /api/v1/tasks` → `201 Task`; goals outside the physical ranges of [`ranges`] are
 /// refused before the fleet sees them.
@@ -35,6 +39,8 @@ pub struct ListQuery {
     robot_id: Option<String>,
     map: Option<String>,
     limit: Option<String>,
+    /// Where the page starts: the `Next-Cursor` of the previous page.
+    cursor: Option<String>,
     /// The token when reads are protected (checked by the auth layer).
     access_token: Option<String>,
 }
@@ -65,21 +71,39 @@ impl ListQuery {
             robot_id: self.robot_id.map(RobotId::new).transpose()?,
             map: self.map.map(MapName::new).transpose()?,
             limit,
+            cursor: self
+                .cursor
+                .map(|c| {
+                    Cursor::decode(&c).ok_or_else(|| {
+                        ApiError::bad_request(
+                            "invalid cursor: expected the Next-Cursor of a previous page"
+                                .to_string(),
+                        )
+                    })
+                })
+                .transpose()?,
         })
     }
 }
 
-/// `GET /api/v1/tasks`.
+/// `GET /api/v1/tasks` → `[Task]`, newest first; the `Next-Cursor` header, when there are
+/// more, is the `cursor` of the next page.
 pub async fn list(
     State(state): State<AppState>,
     query: Result<Query<ListQuery>, QueryRejection>,
-) -> Result<Json<Vec<Task>>, ApiError> {
+) -> Result<(HeaderMap, Json<Vec<Task>>), ApiError> {
     let Query(q) = query?;
     let filter = q.filter()?;
     let fleet = state.fleet.clone();
-    Ok(Json(
-        tokio::task::spawn_blocking(move || fleet.tasks(&filter)).await??,
-    ))
+    let page = tokio::task::spawn_blocking(move || fleet.task_page(&filter)).await??;
+    let mut headers = HeaderMap::new();
+    if let Some(next) = page.next_cursor {
+        // Hex text: always a valid header value.
+        if let Ok(v) = HeaderValue::from_str(&next.encode()) {
+            headers.insert(HeaderName::from_static(NEXT_CURSOR), v);
+        }
+    }
+    Ok((headers, Json(page.tasks)))
 }
 
 /// `GET /api/v1/tasks/{id}`.
