@@ -128,19 +128,50 @@ impl Auditor {
     }
 
     #[must_use]
-    pub fn finish(mut self) -> IntentionAudit {
-        let a = &mut self.audit;
+    pub fn finish(self) -> IntentionAudit {
+        self.audit.with_means(self.sum_differs_m, self.sum_agrees_m)
+    }
+}
+
+impl IntentionAudit {
+    /// The audit with its mean errors set from the sums of the errors over its differing and
+    /// agreeing cycles.
+    #[must_use]
+    fn with_means(mut self, sum_differs_m: f64, sum_agrees_m: f64) -> Self {
         #[allow(clippy::cast_precision_loss)]
         {
-            if a.dlm_differs > 0 {
-                a.mean_error_when_differs_m = self.sum_differs_m / a.dlm_differs as f64;
+            if self.dlm_differs > 0 {
+                self.mean_error_when_differs_m = sum_differs_m / self.dlm_differs as f64;
             }
-            let agree = a.cycles - a.dlm_differs;
+            let agree = self.cycles - self.dlm_differs;
             if agree > 0 {
-                a.mean_error_when_agrees_m = self.sum_agrees_m / agree as f64;
+                self.mean_error_when_agrees_m = sum_agrees_m / agree as f64;
             }
         }
-        self.audit
+        self
+    }
+
+    /// The audits of several runs as one (the mean errors weighted by their cycles); `None`
+    /// for none.
+    #[must_use]
+    pub fn sum<'a>(audits: impl IntoIterator<Item = &'a IntentionAudit>) -> Option<Self> {
+        let mut total: Option<Self> = None;
+        let (mut differs_m, mut agrees_m) = (0.0, 0.0);
+        for a in audits {
+            let t = total.get_or_insert_with(Self::default);
+            t.cycles += a.cycles;
+            t.dlm_differs += a.dlm_differs;
+            t.turn_missed += a.turn_missed;
+            t.turn_wrong += a.turn_wrong;
+            t.events += a.events;
+            t.events_with_intervention += a.events_with_intervention;
+            #[allow(clippy::cast_precision_loss)]
+            {
+                differs_m += a.mean_error_when_differs_m * a.dlm_differs as f64;
+                agrees_m += a.mean_error_when_agrees_m * (a.cycles - a.dlm_differs) as f64;
+            }
+        }
+        total.map(|t| t.with_means(differs_m, agrees_m))
     }
 }
 
@@ -198,5 +229,21 @@ mod tests {
         assert_eq!(r.events_with_intervention, 1);
         assert_eq!(r.turn_missed, 8);
         assert_eq!(r.turn_wrong, 8);
+    }
+
+    #[test]
+    fn summed_audits_weight_the_mean_errors_by_cycles() {
+        let mut a = Auditor::default();
+        cycles(&mut a, 0.0, 10, GoForward, TurnLeft, 0.5);
+        cycles(&mut a, 1.0, 30, GoForward, GoForward, 0.1);
+        let mut b = Auditor::default();
+        cycles(&mut b, 0.0, 30, GoForward, TurnLeft, 0.1);
+        cycles(&mut b, 3.0, 10, GoForward, GoForward, 0.3);
+        let (a, b) = (a.finish(), b.finish());
+        let t = IntentionAudit::sum([&a, &b]).unwrap();
+        assert_eq!((t.cycles, t.dlm_differs, t.turn_missed), (80, 40, 40));
+        assert!((t.mean_error_when_differs_m - (10.0 * 0.5 + 30.0 * 0.1) / 40.0).abs() < 1e-12);
+        assert!((t.mean_error_when_agrees_m - (30.0 * 0.1 + 10.0 * 0.3) / 40.0).abs() < 1e-12);
+        assert_eq!(IntentionAudit::sum([]), None);
     }
 }

@@ -91,42 +91,6 @@ pub struct Row {
     pub intention_audit: Option<IntentionAudit>,
 }
 
-/// Sums the audits of some runs (the mean errors weighted by their cycles); `None` if none.
-#[must_use]
-pub fn sum_audits<'a>(
-    audits: impl IntoIterator<Item = &'a IntentionAudit>,
-) -> Option<IntentionAudit> {
-    let mut total: Option<IntentionAudit> = None;
-    let (mut differs_m, mut agrees_m) = (0.0, 0.0);
-    for a in audits {
-        let t = total.get_or_insert_with(IntentionAudit::default);
-        t.cycles += a.cycles;
-        t.dlm_differs += a.dlm_differs;
-        t.turn_missed += a.turn_missed;
-        t.turn_wrong += a.turn_wrong;
-        t.events += a.events;
-        t.events_with_intervention += a.events_with_intervention;
-        #[allow(clippy::cast_precision_loss)]
-        {
-            differs_m += a.mean_error_when_differs_m * a.dlm_differs as f64;
-            agrees_m += a.mean_error_when_agrees_m * (a.cycles - a.dlm_differs) as f64;
-        }
-    }
-    if let Some(t) = total.as_mut() {
-        #[allow(clippy::cast_precision_loss)]
-        {
-            if t.dlm_differs > 0 {
-                t.mean_error_when_differs_m = differs_m / t.dlm_differs as f64;
-            }
-            let agree = t.cycles - t.dlm_differs;
-            if agree > 0 {
-                t.mean_error_when_agrees_m = agrees_m / agree as f64;
-            }
-        }
-    }
-    total
-}
-
 /// `table.json`: the rows and how they were made.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -196,7 +160,7 @@ pub fn rows(runs: &[RunResult]) -> Vec<Row> {
                 min_person_distance_m: min_of(&|r| r.min_person_distance_m),
                 min_glass_distance_m: min_of(&|r| r.min_glass_distance_m),
                 mean_position_error_m: of(&|r| Some(r.mean_position_error_m)),
-                intention_audit: sum_audits(
+                intention_audit: IntentionAudit::sum(
                     group.iter().filter_map(|r| r.intention_audit.as_ref()),
                 ),
                 scenario,
