@@ -1,5 +1,5 @@
 //! The planner service's configuration file: `[planner]`, `[dlm]`, `[lpe]`, `[http]`, `[zenoh]`,
-//! `[fleet]` tables.
+//! `[fleet]` and `[demo]` tables.
 //!
 //! Every table has defaults, so a file names only what it changes; unknown keys are errors.
 //! `planner.example.toml` in the crate documents every key (a test parses it). `serve` applies
@@ -12,6 +12,7 @@ use map_store::ImportLimits;
 use serde::{Deserialize, Serialize};
 
 use crate::fleet::FleetConfig;
+use crate::restart::{RestartPolicy, RestartPolicyError};
 use planning::intention::dlm::DlmParamsError;
 use planning::intention::{DlmParams, LpeParams};
 use planning::{PlanError, PlannerConfig};
@@ -28,6 +29,17 @@ pub struct ServiceConfig {
     pub zenoh: ZenohConfig,
     /// The fleet core (`[fleet]`): goal tolerance, timeouts of silent robots and paused tasks.
     pub fleet: FleetConfig,
+    /// `planner-service demo` only (`[demo]`): how it supervises its child processes.
+    pub demo: DemoConfig,
+}
+
+/// How `planner-service demo` supervises the processes it starts (`[demo]`).
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DemoConfig {
+    /// A robot agent that exits is started again after this back-off
+    /// (`[demo.agent_restart]`).
+    pub agent_restart: RestartPolicy,
 }
 
 /// The HTTP API (`[http]`).
@@ -300,6 +312,8 @@ pub enum ServiceConfigError {
     /// `[fleet]`, as the fleet core words it.
     #[error("{0}")]
     Fleet(#[from] crate::fleet::InvalidFleetConfig),
+    #[error("[demo.agent_restart] {0}")]
+    DemoRestart(#[from] RestartPolicyError),
 }
 
 impl ServiceConfig {
@@ -356,6 +370,7 @@ impl ServiceConfig {
         self.http.validate()?;
         self.zenoh.session_config()?;
         self.fleet.validate()?;
+        self.demo.agent_restart.validate()?;
         Ok(())
     }
 }
@@ -383,6 +398,10 @@ mod tests {
         assert!(err.to_string().contains("max_upload_bytes"), "{err}");
         let err = ServiceConfig::from_toml_str("[http]\ntoken = \"short\"\n", "t").unwrap_err();
         assert!(err.to_string().contains("http.token"), "{err}");
+        let err =
+            ServiceConfig::from_toml_str("[demo.agent_restart]\ninitial_backoff_ms = 0\n", "t")
+                .unwrap_err();
+        assert!(err.to_string().contains("initial_backoff_ms = 0"), "{err}");
         let err =
             ServiceConfig::from_toml_str("[http]\ncors = [\"example.com\"]\n", "t").unwrap_err();
         assert!(err.to_string().contains("example.com"), "{err}");

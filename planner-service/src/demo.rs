@@ -6,20 +6,30 @@
 //! by [`crate::launch`]: the simulator with N robots and one `robot-agent` per robot. It prints the
 //! dashboard URL and the token and runs until Ctrl-C or SIGTERM, then stops the agents, the
 //! simulator and the service, in that order.
+//!
+//! It supervises the agents as a process manager would: an agent that exits (a crash, a kill)
+//! is started again with back-off ([`crate::restart`], `[demo.agent_restart]`), localizing from
+//! the pose the service last heard from it. Meanwhile the service sees the robot fall silent,
+//! marks it offline and pauses its task, and resumes the task when the new agent reports, as it
+//! does for agents that run on their own. The simulator is the world: when it exits the demo
+//! stops.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
 use map_store::{import_into, ImportLimits, MapStore};
-use protocol::{ControllerKind, MapName};
+use protocol::{ControllerKind, MapName, Pose2D, RobotId};
 
 use crate::http::{ServeOptions, Server};
 use crate::launch::{Robots, RobotsSpec};
+use crate::restart::{ChildPhase, RestartPolicy, Restarts};
 
 /// How long each group of children (agents, then the simulator) gets to stop after SIGTERM.
 const STOP_GRACE: Duration = Duration::from_secs(5);
+/// How often the demo looks at its children.
+const SUPERVISE_INTERVAL: Duration = Duration::from_millis(200);
 
 /// What to start.
 #[derive(Debug, Clone)]
@@ -89,6 +99,9 @@ pub struct Demo {
     pub server: Server,
     pub map: MapName,
     robots: Option<Robots>,
+    /// One per agent, in roster order.
+    restarts: Vec<Restarts>,
+    restart_policy: RestartPolicy,
 }
 
 impl Demo {
@@ -133,18 +146,16 @@ impl Demo {
             serve.config.zenoh.listen = vec!["tcp/127.0.0.1:0".to_string()];
         }
         let site = serve.config.zenoh.site.clone();
+        let restart_policy = serve.config.demo.agent_restart;
         let server = Server::start(serve).await?;
-        let endpoints: Vec<String> = server
-            .zenoh_locators()
-            .await
-            .into_iter()
-            .filter(|l| l.starts_with("tcp/"))
-            .collect();
         let mut demo = Self {
             server,
             map,
             robots: None,
+            restarts: Vec::new(),
+            restart_policy,
         };
+        let endpoints = demo.zenoh_endpoints().await;
         if endpoints.is_empty() {
             demo.stop().await;
             bail!("the service listens on no tcp endpoint for the robots");
@@ -162,6 +173,12 @@ impl Demo {
         };
         match tokio::task::spawn_blocking(move || Robots::start(&spec)).await {
             Ok(Ok(robots)) => {
+                let now = Instant::now();
+                demo.restarts = robots
+                    .agents
+                    .iter()
+                    .map(|_| Restarts::new(demo.restart_policy, now))
+                    .collect();
                 demo.robots = Some(robots);
                 Ok(demo)
             }
@@ -176,9 +193,69 @@ impl Demo {
         }
     }
 
-    /// The first child that exited, if any (name and status).
-    pub fn exited_child(&mut self) -> Option<String> {
-        self.robots.as_mut().and_then(Robots::exited)
+    /// The Zenoh endpoints the robots connect to.
+    pub async fn zenoh_endpoints(&self) -> Vec<String> {
+        self.server
+            .zenoh_locators()
+            .await
+            .into_iter()
+            .filter(|l| l.starts_with("tcp/"))
+            .collect()
+    }
+
+    /// One supervision round at `now`: agents seen to have exited are scheduled for a restart,
+    /// agents whose back-off has passed are started again at the robot's last reported pose
+    /// (the roster's start pose if it never reported one). Returns what it did, for the log.
+    ///
+    /// # Errors
+    /// The simulator exited (`sim exited (…)`): the world is gone, the demo must stop.
+    pub fn supervise(&mut self, now: Instant) -> anyhow::Result<Vec<String>> {
+        let Some(robots) = self.robots.as_mut() else {
+            return Ok(Vec::new());
+        };
+        if let Some(what) = robots.sim_exited() {
+            bail!("{what}");
+        }
+        let mut done = Vec::new();
+        for (i, status) in robots.exited_agents() {
+            let Some(r) = self.restarts.get_mut(i) else {
+                continue;
+            };
+            if matches!(r.phase(), ChildPhase::Running { .. }) {
+                let delay = r.exited(now);
+                done.push(format!(
+                    "agent {} exited ({status}); restarting it in {:.1} s",
+                    robots.roster.robots[i].id,
+                    delay.as_secs_f64()
+                ));
+            }
+        }
+        for i in 0..self.restarts.len() {
+            if !self.restarts[i].due(now) {
+                continue;
+            }
+            let id = robots.roster.robots[i].id.clone();
+            let pose = last_pose(&self.server, &id).unwrap_or(robots.roster.robots[i].pose());
+            let r = &mut self.restarts[i];
+            r.started(now);
+            match robots.restart_agent(i, pose) {
+                Ok(()) => done.push(format!(
+                    "agent {id} restarted (restart {}) at x {:.2} m, y {:.2} m, yaw {:.2} rad",
+                    r.restarts(),
+                    pose.x_m,
+                    pose.y_m,
+                    pose.yaw_rad
+                )),
+                Err(e) => {
+                    let delay = r.exited(now);
+                    done.push(format!(
+                        "agent {id} could not be restarted ({e}); trying again in {:.1} s",
+                        delay.as_secs_f64()
+                    ));
+                }
+            }
+        }
+        Ok(done)
     }
 
     /// Stops the agents, then the simulator (SIGTERM, then SIGKILL after 5 s), then the service.
@@ -194,6 +271,12 @@ impl Demo {
     }
 }
 
+/// Where the service last saw `robot` (its agent's estimate), as a start pose for a new agent.
+fn last_pose(server: &Server, robot: &RobotId) -> Option<Pose2D> {
+    let p = server.fleet().robot(robot)?.pose?;
+    Some(Pose2D::new(p.x_m, p.y_m, p.yaw_rad))
+}
+
 /// Runs the demo until Ctrl-C or SIGTERM, printing the dashboard URL and the token to `out`.
 ///
 /// # Errors
@@ -205,6 +288,7 @@ pub async fn run(opts: DemoOptions, out: &mut dyn Write) -> anyhow::Result<()> {
     writeln!(out, "dashboard: {}/", demo.server.url())?;
     writeln!(out, "listening on {}", demo.server.url())?;
     writeln!(out, "token: {}", demo.server.token())?;
+    writeln!(out, "zenoh: {}", demo.zenoh_endpoints().await.join(" "))?;
     writeln!(
         out,
         "try: curl -X POST {}/api/v1/tasks -H 'Authorization: Bearer {}' -H 'Content-Type: application/json' -d '{{\"map\":\"{}\",\"goals\":[{{\"x_m\":13.0,\"y_m\":10.0}}]}}'",
@@ -213,20 +297,30 @@ pub async fn run(opts: DemoOptions, out: &mut dyn Write) -> anyhow::Result<()> {
         demo.map
     )?;
     out.flush()?;
-    let mut check = tokio::time::interval(Duration::from_secs(1));
+    let mut check = tokio::time::interval(SUPERVISE_INTERVAL);
+    check.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let stop = crate::cli::wait_for_stop_signal();
+    tokio::pin!(stop);
     loop {
         tokio::select! {
-            r = crate::cli::wait_for_stop_signal() => {
+            r = &mut stop => {
                 if let Err(e) = r {
                     tracing::error!("{e:#}");
                 }
                 break;
             }
             _ = check.tick() => {
-                if let Some(what) = demo.exited_child() {
-                    tracing::error!("{what}; stopping the demo");
-                    demo.stop().await;
-                    bail!("{what}");
+                match demo.supervise(Instant::now()) {
+                    Ok(done) => {
+                        for line in done {
+                            tracing::warn!("{line}");
+                        }
+                    }
+                    Err(e) => {
+                        tracing::error!("{e:#}; stopping the demo");
+                        demo.stop().await;
+                        return Err(e);
+                    }
                 }
             }
         }

@@ -9,7 +9,8 @@
 //! [`Process::wait_line`] waits for a line, and the child is killed (SIGKILL) when its handle
 //! drops, so a failed start, an error or a panic leaves nothing running. [`Robots::stop`] ends
 //! them politely instead: SIGTERM to every agent (an agent sends a last zero velocity), then to
-//! the simulator, SIGKILL after a grace period.
+//! the simulator, SIGKILL after a grace period. [`Robots::restart_agent`] starts an agent that
+//! exited again (the demo's supervision, [`crate::restart`]).
 //!
 //! Network controllers (`dlm`, `lpe`, `none`) get `--model <models>/<controller>.onnx`, where
 //! `<models>` is [`RobotsSpec::models_dir`] or else looked up with
@@ -365,6 +366,10 @@ pub struct Robots {
     pub roster: Roster,
     /// One per robot, in roster order, named `agent <robot id>`.
     pub agents: Vec<Process>,
+    /// What starting an agent again needs.
+    spec: RobotsSpec,
+    agent_bin: PathBuf,
+    models: Vec<(ControllerKind, PathBuf)>,
 }
 
 impl Robots {
@@ -407,34 +412,76 @@ impl Robots {
             });
         }
 
-        let mut agents = Vec::with_capacity(roster.robots.len());
-        for (i, robot) in roster.robots.iter().enumerate() {
-            let controller = spec.controller(i);
-            let model = models
-                .iter()
-                .find(|(c, _)| *c == controller)
-                .map(|(_, p)| p.as_path());
-            let cmd = agent_command(&agent_bin, spec, &robot.id, robot.pose(), controller, model);
-            let mut agent = Process::spawn(&format!("agent {}", robot.id), cmd)?;
-            agent.stop_collecting();
-            agents.push(agent);
-        }
-        Ok(Self {
+        let mut robots = Self {
             sim,
             roster,
-            agents,
-        })
+            agents: Vec::with_capacity(spec.robots),
+            spec: spec.clone(),
+            agent_bin,
+            models,
+        };
+        for i in 0..robots.roster.robots.len() {
+            let pose = robots.roster.robots[i].pose();
+            let agent = robots.spawn_agent(i, pose)?;
+            robots.agents.push(agent);
+        }
+        Ok(robots)
     }
 
-    /// The first child that exited, with its status (`agent robot_2 exited (signal: 9)`).
-    pub fn exited(&mut self) -> Option<String> {
+    /// Starts the agent of the `index`-th robot of the roster, localizing from `pose`.
+    fn spawn_agent(&self, index: usize, pose: Pose2D) -> Result<Process, LaunchError> {
+        let robot = &self.roster.robots[index];
+        let controller = self.spec.controller(index);
+        let model = self
+            .models
+            .iter()
+            .find(|(c, _)| *c == controller)
+            .map(|(_, p)| p.as_path());
+        let cmd = agent_command(
+            &self.agent_bin,
+            &self.spec,
+            &robot.id,
+            pose,
+            controller,
+            model,
+        );
+        let mut agent = Process::spawn(&format!("agent {}", robot.id), cmd)?;
+        agent.stop_collecting();
+        Ok(agent)
+    }
+
+    /// Starts the `index`-th agent again (its old process is reaped, killed if it still ran),
+    /// localizing from `pose`: where the robot was last seen, not where it started.
+    ///
+    /// # Errors
+    /// [`LaunchError::Spawn`]; `index` past the roster is [`LaunchError::RobotCount`].
+    pub fn restart_agent(&mut self, index: usize, pose: Pose2D) -> Result<(), LaunchError> {
+        if index >= self.agents.len() {
+            return Err(LaunchError::RobotCount {
+                want: index + 1,
+                got: self.agents.len(),
+            });
+        }
+        let agent = self.spawn_agent(index, pose)?;
+        // Dropping the old handle reaps it.
+        self.agents[index] = agent;
+        Ok(())
+    }
+
+    /// The simulator's exit, with its status (`sim exited (signal: 9)`), once it has exited.
+    pub fn sim_exited(&mut self) -> Option<String> {
+        self.sim
+            .exit_status()
+            .map(|status| format!("{} exited ({status})", self.sim.name))
+    }
+
+    /// The agents that have exited: (roster index, exit status).
+    pub fn exited_agents(&mut self) -> Vec<(usize, ExitStatus)> {
         self.agents
             .iter_mut()
-            .chain(std::iter::once(&mut self.sim))
-            .find_map(|p| {
-                p.exit_status()
-                    .map(|status| format!("{} exited ({status})", p.name))
-            })
+            .enumerate()
+            .filter_map(|(i, p)| p.exit_status().map(|s| (i, s)))
+            .collect()
     }
 
     /// Stops the agents (SIGTERM, all at once), then the simulator, each group within `grace`

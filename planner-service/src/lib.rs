@@ -8,6 +8,7 @@
 //! - [`http`]: the HTTP API (docs/api.md) and the running service behind `serve`.
 //! - [`demo`]: the fleet demo (service + simulator + agents as processes); [`launch`]: the
 //!   launcher of the simulator and the agents that the demo and the end-to-end tests share;
+//!   [`restart`]: the back-off with which the demo restarts an agent that exited;
 //!   [`fleet_bench`]: the replanning-loop benchmark; [`store_bench`]: the task-store (list and
 //!   snapshot) benchmark.
 //! - [`cli`], [`bench`]: the `planner-service` command line and its planner benchmark.
@@ -20,4 +21,5 @@ pub mod fleet;
 pub mod fleet_bench;
 pub mod http;
 pub mod launch;
+pub mod restart;
 pub mod store_bench;

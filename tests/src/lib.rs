@@ -130,6 +130,57 @@ impl Service {
         })
     }
 
+    /// Starts `planner-service demo` (the service, the simulator and `robots` agents, on
+    /// `scenario`) on a free HTTP port, with `config` as its configuration file if given. Its
+    /// [`Service::zenoh`] is the endpoint it prints.
+    ///
+    /// # Errors
+    /// If it does not print its address, token and Zenoh endpoint within 120 s.
+    pub fn start_demo(
+        bins: &Path,
+        data_dir: &Path,
+        scenario: &Path,
+        robots: usize,
+        token: &str,
+        config: Option<&Path>,
+    ) -> Result<Self> {
+        let mut cmd = Command::new(bins.join("planner-service"));
+        cmd.arg("demo")
+            .arg("--listen")
+            .arg("127.0.0.1:0")
+            .arg("--data-dir")
+            .arg(data_dir)
+            .arg("--token")
+            .arg(token)
+            .arg("--scenario")
+            .arg(scenario)
+            .arg("--robots")
+            .arg(robots.to_string())
+            .env(
+                "RUST_LOG",
+                std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()),
+            )
+            .env_remove("RUST_BACKTRACE");
+        if let Some(config) = config {
+            cmd.arg("--config").arg(config);
+        }
+        let mut proc = Process::spawn("demo", cmd)?;
+        let wait = Duration::from_secs(120);
+        let url = proc.wait_line(wait, |l| {
+            l.strip_prefix("listening on ")
+                .map(|u| u.trim().to_string())
+        })?;
+        let zenoh = proc.wait_line(wait, |l| {
+            l.strip_prefix("zenoh: ").map(|u| u.trim().to_string())
+        })?;
+        Ok(Self {
+            proc,
+            url,
+            token: token.into(),
+            zenoh,
+        })
+    }
+
     fn client() -> Result<reqwest::blocking::Client> {
         reqwest::blocking::Client::builder()
             .timeout(Duration::from_secs(30))
@@ -279,6 +330,39 @@ pub fn start_robots(
     let mut spec = RobotsSpec::new(bins, scenario, robots, map, vec![zenoh.to_string()]);
     spec.controllers = vec![controller];
     Ok(Robots::start(&spec)?)
+}
+
+/// The children of process `parent` whose command line contains every one of `args` (Linux:
+/// read from `/proc`; empty elsewhere).
+#[must_use]
+pub fn child_pids(parent: u32, args: &[&str]) -> Vec<u32> {
+    let Ok(entries) = std::fs::read_dir("/proc") else {
+        return Vec::new();
+    };
+    let mut pids: Vec<u32> = entries
+        .flatten()
+        .filter_map(|e| e.file_name().to_str()?.parse::<u32>().ok())
+        .filter(|pid| {
+            // `stat` is "pid (comm) state ppid …"; comm may hold spaces, so split after ')'.
+            let Ok(stat) = std::fs::read_to_string(format!("/proc/{pid}/stat")) else {
+                return false;
+            };
+            let ppid = stat
+                .rsplit_once(')')
+                .and_then(|(_, rest)| rest.split_whitespace().nth(1))
+                .and_then(|v| v.parse::<u32>().ok());
+            if ppid != Some(parent) {
+                return false;
+            }
+            let Ok(cmdline) = std::fs::read(format!("/proc/{pid}/cmdline")) else {
+                return false;
+            };
+            let words: Vec<&[u8]> = cmdline.split(|b| *b == 0).collect();
+            args.iter().all(|a| words.contains(&a.as_bytes()))
+        })
+        .collect();
+    pids.sort_unstable();
+    pids
 }
 
 /// The robot `id` in a robot list.

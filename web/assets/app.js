@@ -581,6 +581,8 @@ function formatStopReason(reason) {
 }
 
 function statusText(robot) {
+  // An offline robot has no status: what it said last is not what it does now.
+  if (!robot.online) return 'offline';
   if (!robot.status) return '—';
   return robot.status.localized === false ? `${robot.status.state} (not localized)` : robot.status.state;
 }

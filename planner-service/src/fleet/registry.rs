@@ -190,10 +190,13 @@ impl RobotRegistry {
         (new, changed)
     }
 
-    /// Marks a known robot offline; `None` for an unknown one.
+    /// Marks a known robot offline; `None` for an unknown one. Its last status goes too: a
+    /// robot nobody hears from is not `driving`, whatever it said last (the agent's next
+    /// status, sent periodically, brings it back).
     pub fn set_offline(&mut self, id: &RobotId) -> Option<&Robot> {
         let robot = self.robots.get_mut(id)?;
         robot.online = false;
+        robot.status = None;
         Some(robot)
     }
 

@@ -266,6 +266,9 @@ fn a_silent_robot_pauses_its_task_resumes_when_it_reports_and_fails_after_the_pa
         .create(new_task(Some("robot_1"), &[(13.0, 10.0)]), 1, t0)
         .unwrap();
     decision(&mut core, &r, &pose(3.0, 4.0), t0);
+    let mut driving = status(true);
+    driving.state = AgentState::Driving;
+    core.status_arrived(&r, driving, t0);
     use TaskStateKind::{Active, Failed, Paused};
 
     let (counts, effects) = core.watchdog(ms(t0, 500));
@@ -274,9 +277,10 @@ fn a_silent_robot_pauses_its_task_resumes_when_it_reports_and_fails_after_the_pa
     // Silent past robot_timeout_ms: offline, and the task paused with the reason.
     let (_, effects) = core.watchdog(ms(t0, 700));
     assert_eq!(announced(&effects), [(Paused, Some(Active))]);
+    // Offline, and no longer saying `driving`.
     assert!(effects
         .iter()
-        .any(|e| matches!(e, Effect::Robot(v) if v.id == r && !v.online)));
+        .any(|e| matches!(e, Effect::Robot(v) if v.id == r && !v.online && v.status.is_none())));
     match state_of(&store, &task.id) {
         TaskState::Paused { reason, .. } => {
             assert_eq!(reason, "robot robot_1 sent no pose for over 600 ms");

@@ -1,0 +1,110 @@
+//! `planner-service demo` as a user runs it: one process that starts the simulator and the
+//! agents, and survives an agent that dies (issue 17, item 7).
+
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use std::time::Duration;
+
+use fleet_tests::{bin_dir, child_pids, repo_root, robot, state_kind, Service};
+use serde_json::{json, Value};
+
+const TOKEN: &str = "demo-test-token-0123456789abcdef";
+
+fn agent_pid(demo: &Service, robot_id: &str) -> Option<u32> {
+    child_pids(demo.proc.pid(), &["--robot-id", robot_id])
+        .first()
+        .copied()
+}
+
+#[test]
+fn a_killed_agent_is_restarted_and_its_task_resumes_and_completes() {
+    let bins = bin_dir().unwrap();
+    let data = tempfile::tempdir().unwrap();
+    // A restart delay longer than the silence timeout (2 s), so the pause is seen.
+    let config = data.path().join("demo.toml");
+    std::fs::write(&config, "[demo.agent_restart]\ninitial_backoff_ms = 4000\n").unwrap();
+    let scenario = repo_root().join("sim/scenarios/task_a.yaml");
+    let demo = Service::start_demo(
+        &bins,
+        &data.path().join("data"),
+        &scenario,
+        1,
+        TOKEN,
+        Some(&config),
+    )
+    .unwrap();
+    assert!(demo.zenoh.starts_with("tcp/127.0.0.1:"), "{}", demo.zenoh);
+    demo.wait_for("/api/v1/robots", Duration::from_secs(90), |v| {
+        robot(v, "robot_1")
+            .and_then(|r| (r["online"] == true && r["pose"].is_object()).then_some(()))
+    })
+    .unwrap();
+
+    let (status, task) = demo
+        .post(
+            "/api/v1/tasks",
+            &json!({"map": "junctions", "robot_id": "robot_1", "goals": [{"x_m": 9.0, "y_m": 4.0}]}),
+        )
+        .unwrap();
+    assert_eq!(status, 201, "{task}");
+    let id = task["id"].as_str().unwrap().to_string();
+    let task_path = format!("/api/v1/tasks/{id}");
+    let wait_state = |kind: &str, secs: u64| -> Value {
+        demo.wait_for(&task_path, Duration::from_secs(secs), |t| {
+            (state_kind(t) == kind).then(|| t.clone())
+        })
+        .unwrap()
+    };
+    wait_state("active", 30);
+    demo.wait_for("/api/v1/robots/robot_1", Duration::from_secs(30), |r| {
+        (r["status"]["state"] == "driving").then_some(())
+    })
+    .unwrap();
+
+    // A crash: SIGKILL, no goodbye.
+    let first = agent_pid(&demo, "robot_1").expect("the demo runs an agent for robot_1");
+    let killed = std::process::Command::new("kill")
+        .args(["-KILL", &first.to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+
+    let paused = wait_state("paused", 15);
+    let reason = paused["state"]["reason"].as_str().unwrap();
+    assert!(
+        reason.contains("robot_1") || reason.contains("liveliness"),
+        "{reason}"
+    );
+    let offline = demo.get("/api/v1/robots/robot_1").unwrap();
+    assert_eq!(offline["online"], false, "{offline}");
+    assert!(
+        offline["status"].is_null(),
+        "an offline robot still reports a status: {offline}"
+    );
+    // The demo itself stays up: restarted with back-off, the task resumes and the robot gets
+    // there.
+    wait_state("active", 60);
+    let second = agent_pid(&demo, "robot_1").expect("a new agent for robot_1");
+    assert_ne!(first, second);
+    let done = wait_state("completed", 180);
+    let kinds: Vec<&str> = done["history"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(state_kind)
+        .collect();
+    let paused_at = kinds.iter().position(|k| *k == "paused").unwrap();
+    assert!(
+        kinds[paused_at..].contains(&"active") && kinds.last() == Some(&"completed"),
+        "{kinds:?}"
+    );
+    let end = demo.get("/api/v1/robots/robot_1").unwrap();
+    let (x, y) = (
+        end["pose"]["x_m"].as_f64().unwrap(),
+        end["pose"]["y_m"].as_f64().unwrap(),
+    );
+    assert!(
+        (x - 9.0).hypot(y - 4.0) < 0.6,
+        "robot_1 ended at ({x}, {y})"
+    );
+}
