@@ -310,64 +310,139 @@ pub fn decode_image(
 }
 
 /// Converts an image to ROS cell values (row 0 at the bottom) per Nav2's rules.
+///
+/// Pixels are read in place, widened to 16 bits one at a time: a whole-image 16-bit RGBA copy
+/// costs 8 bytes a pixel (800 MB for a 100-megapixel plan) where the grid needs one.
 #[must_use]
 pub fn occupancy_from_image(img: &DynamicImage, how: &Interpretation) -> Vec<u8> {
     let (w, h) = img.dimensions();
     let has_alpha = img.color().has_alpha();
-    // Work in 16-bit so 8- and 16-bit images follow one code path with exact scaling.
-    let rgba = img.to_rgba16();
-    let max = f64::from(u16::MAX);
     let mut cells = vec![UNKNOWN; w as usize * h as usize];
-    for (x, y, px) in rgba.enumerate_pixels() {
-        let [r, g, b, a] = px.0;
-        let mut sum = f64::from(r) + f64::from(g) + f64::from(b);
-        let mut n = 3.0;
-        if how.mode == MapMode::Trinary && has_alpha {
-            sum += max - f64::from(a);
-            n += 1.0;
-        }
-        let shade = sum / n / max;
-        let occ = if how.negate { shade } else { 1.0 - shade };
-        let value = match how.mode {
-            MapMode::Trinary => {
-                if how.occupied_thresh < occ {
-                    OCCUPIED
-                } else if occ < how.free_thresh {
-                    FREE
-                } else {
-                    UNKNOWN
-                }
-            }
-            MapMode::Scale => {
-                if has_alpha && a != u16::MAX {
-                    UNKNOWN
-                } else if how.occupied_thresh < occ {
-                    OCCUPIED
-                } else if occ < how.free_thresh {
-                    FREE
-                } else {
-                    let ratio = (occ - how.free_thresh) / (how.occupied_thresh - how.free_thresh);
-                    // In [0, 100] by the branch conditions.
-                    #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-                    let v = (ratio * 100.0).round_ties_even() as u8;
-                    v
-                }
-            }
-            MapMode::Raw => {
-                let pct = (shade * 255.0).round();
-                if (0.0..=100.0).contains(&pct) {
-                    #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-                    let v = pct as u8;
-                    v
-                } else {
-                    UNKNOWN
-                }
-            }
-        };
+    for_each_rgba16(img, |x, y, px| {
         // Image row 0 is the top; grid row 0 is the bottom.
-        cells[(h - 1 - y) as usize * w as usize + x as usize] = value;
-    }
+        cells[(h - 1 - y) as usize * w as usize + x as usize] = cell_value(px, has_alpha, how);
+    });
     cells
+}
+
+/// Calls `f(x, y, [r, g, b, a])` for every pixel, widened to 16 bits as `image`'s own
+/// conversions do (an 8-bit `v` becomes `v * 257`, grey is copied to r, g and b, no alpha is
+/// opaque).
+fn for_each_rgba16(img: &DynamicImage, mut f: impl FnMut(u32, u32, [u16; 4])) {
+    const OPAQUE: u16 = u16::MAX;
+    let wide = |v: u8| u16::from(v) * 257;
+    match img {
+        DynamicImage::ImageLuma8(b) => b.enumerate_pixels().for_each(|(x, y, p)| {
+            let v = wide(p.0[0]);
+            f(x, y, [v, v, v, OPAQUE]);
+        }),
+        DynamicImage::ImageLumaA8(b) => b.enumerate_pixels().for_each(|(x, y, p)| {
+            let v = wide(p.0[0]);
+            f(x, y, [v, v, v, wide(p.0[1])]);
+        }),
+        DynamicImage::ImageRgb8(b) => b.enumerate_pixels().for_each(|(x, y, p)| {
+            let [r, g, bl] = p.0;
+            f(x, y, [wide(r), wide(g), wide(bl), OPAQUE]);
+        }),
+        DynamicImage::ImageRgba8(b) => b.enumerate_pixels().for_each(|(x, y, p)| {
+            let [r, g, bl, a] = p.0;
+            f(x, y, [wide(r), wide(g), wide(bl), wide(a)]);
+        }),
+        DynamicImage::ImageLuma16(b) => b.enumerate_pixels().for_each(|(x, y, p)| {
+            let v = p.0[0];
+            f(x, y, [v, v, v, OPAQUE]);
+        }),
+        DynamicImage::ImageLumaA16(b) => b.enumerate_pixels().for_each(|(x, y, p)| {
+            let [v, a] = p.0;
+            f(x, y, [v, v, v, a]);
+        }),
+        DynamicImage::ImageRgb16(b) => b.enumerate_pixels().for_each(|(x, y, p)| {
+            let [r, g, bl] = p.0;
+            f(x, y, [r, g, bl, OPAQUE]);
+        }),
+        DynamicImage::ImageRgba16(b) => b.enumerate_pixels().for_each(|(x, y, p)| f(x, y, p.0)),
+        // Float images come from no decoder we enable (PGM, PNG, BMP, JPEG); convert a row at
+        // a time rather than the whole picture.
+        other => {
+            for y in 0..other.height() {
+                let row = other.crop_imm(0, y, other.width(), 1).to_rgba16();
+                for (x, _, p) in row.enumerate_pixels() {
+                    f(x, y, p.0);
+                }
+            }
+        }
+    }
+}
+
+/// One pixel's ROS cell value under `how`.
+fn cell_value([r, g, b, a]: [u16; 4], has_alpha: bool, how: &Interpretation) -> u8 {
+    let max = f64::from(u16::MAX);
+    let mut sum = f64::from(r) + f64::from(g) + f64::from(b);
+    let mut n = 3.0;
+    if how.mode == MapMode::Trinary && has_alpha {
+        sum += max - f64::from(a);
+        n += 1.0;
+    }
+    let shade = sum / n / max;
+    let occ = if how.negate { shade } else { 1.0 - shade };
+    match how.mode {
+        MapMode::Trinary => {
+            if how.occupied_thresh < occ {
+                OCCUPIED
+            } else if occ < how.free_thresh {
+                FREE
+            } else {
+                UNKNOWN
+            }
+        }
+        MapMode::Scale => {
+            if has_alpha && a != u16::MAX {
+                UNKNOWN
+            } else if how.occupied_thresh < occ {
+                OCCUPIED
+            } else if occ < how.free_thresh {
+                FREE
+            } else {
+                let ratio = (occ - how.free_thresh) / (how.occupied_thresh - how.free_thresh);
+                // In [0, 100] by the branch conditions.
+                #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+                let v = (ratio * 100.0).round_ties_even() as u8;
+                v
+            }
+        }
+        MapMode::Raw => {
+            let pct = (shade * 255.0).round();
+            if (0.0..=100.0).contains(&pct) {
+                #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+                let v = pct as u8;
+                v
+            } else {
+                UNKNOWN
+            }
+        }
+    }
+}
+
+/// Bytes that decoding an image and turning it into a grid take at the peak: the decoded
+/// pixels (their colour type's size) plus one byte a cell for the grid, from the header only,
+/// so a caller can budget memory before anything is decoded.
+///
+/// # Errors
+/// [`MapError::Image`] when the header cannot be read.
+pub fn decode_cost_bytes(bytes: &[u8], path: &Path) -> Result<u64, MapError> {
+    use image::ImageDecoder;
+    let image_err = |e: &dyn std::fmt::Display| MapError::Image {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    };
+    let decoder = image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| image_err(&e))?
+        .into_decoder()
+        .map_err(|e| image_err(&e))?;
+    let (w, h) = decoder.dimensions();
+    let per_pixel = u64::from(decoder.color_type().bytes_per_pixel()) + 1;
+    Ok((u64::from(w) * u64::from(h)).saturating_mul(per_pixel))
 }
 
 fn show(v: &Value) -> String {
@@ -395,6 +470,56 @@ mod tests {
 
     fn shared_maps() -> PathBuf {
         nav2_maps_dir()
+    }
+
+    /// The pixel walk reads every colour type as `image`'s whole-image 16-bit conversion does.
+    #[test]
+    fn pixels_are_read_in_place_as_the_16_bit_conversion_reads_them() {
+        let (w, h) = (7u32, 5u32);
+        // A fixed pseudo-random picture (LCG) so every channel takes varied values.
+        let mut state = 0x2545_f491_u32;
+        let mut next = || {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            u16::try_from(state >> 16).unwrap()
+        };
+        let src =
+            image::ImageBuffer::from_fn(w, h, |_, _| image::Rgba([next(), next(), next(), next()]));
+        let base = DynamicImage::ImageRgba16(src);
+        let variants = [
+            DynamicImage::ImageLuma8(base.to_luma8()),
+            DynamicImage::ImageLumaA8(base.to_luma_alpha8()),
+            DynamicImage::ImageRgb8(base.to_rgb8()),
+            DynamicImage::ImageRgba8(base.to_rgba8()),
+            DynamicImage::ImageLuma16(base.to_luma16()),
+            DynamicImage::ImageLumaA16(base.to_luma_alpha16()),
+            DynamicImage::ImageRgb16(base.to_rgb16()),
+            base.clone(),
+            DynamicImage::ImageRgb32F(base.to_rgb32f()),
+        ];
+        for img in &variants {
+            let mut seen = Vec::new();
+            for_each_rgba16(img, |x, y, px| seen.push((x, y, px)));
+            let want: Vec<(u32, u32, [u16; 4])> = img
+                .to_rgba16()
+                .enumerate_pixels()
+                .map(|(x, y, p)| (x, y, p.0))
+                .collect();
+            assert_eq!(seen, want, "{:?}", img.color());
+        }
+    }
+
+    #[test]
+    fn decode_cost_counts_decoded_pixels_and_the_grid() {
+        let img = DynamicImage::ImageLuma8(image::GrayImage::new(300, 200));
+        let mut png = Vec::new();
+        img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+            .unwrap();
+        assert_eq!(
+            decode_cost_bytes(&png, Path::new("m.png")).unwrap(),
+            300 * 200 * 2
+        );
+        let err = decode_cost_bytes(b"not an image", Path::new("m.png")).unwrap_err();
+        assert!(err.to_string().contains("m.png"), "{err}");
     }
 
     #[test]

@@ -72,6 +72,16 @@ pub struct HttpConfig {
     /// Most connections open at once; the next one is answered `503` with `Retry-After` and
     /// closed.
     pub max_connections: u32,
+    /// Memory all floor-plan decodes (uploads and previews) may take together, in bytes,
+    /// estimated from each picture's header before it is decoded. One that needs more than all
+    /// of it is refused with `413`.
+    pub decode_budget_bytes: u64,
+    /// How long a decode waits for room in the budget, in milliseconds, before `503` with
+    /// `Retry-After`.
+    pub decode_wait_ms: u64,
+    /// Rendered map images (`GET /maps/{name}/image`) kept in memory, in bytes, per map
+    /// version; 0 renders every request.
+    pub image_cache_bytes: u64,
 }
 
 impl Default for HttpConfig {
@@ -87,6 +97,9 @@ impl Default for HttpConfig {
             header_read_timeout_ms: 10_000,
             idle_timeout_ms: 60_000,
             max_connections: 256,
+            decode_budget_bytes: 1 << 30,
+            decode_wait_ms: 10_000,
+            image_cache_bytes: 64 << 20,
         }
     }
 }
@@ -112,7 +125,8 @@ pub enum HttpConfigError {
     CorsOrigin { origin: String },
     #[error("invalid {field} = {value}: must be within {min}..={max}")]
     OutOfRange {
-        /// `http.header_read_timeout_ms`, `http.idle_timeout_ms` or `http.max_connections`.
+        /// `http.header_read_timeout_ms`, `http.idle_timeout_ms`, `http.max_connections`,
+        /// `http.decode_budget_bytes`, `http.decode_wait_ms` or `http.image_cache_bytes`.
         field: &'static str,
         value: u64,
         min: u64,
@@ -159,6 +173,19 @@ impl HttpConfig {
                 1,
                 u64::from(MAX_HTTP_CONNECTIONS),
             ),
+            (
+                "http.decode_budget_bytes",
+                self.decode_budget_bytes,
+                1 << 20,
+                1 << 42,
+            ),
+            (
+                "http.decode_wait_ms",
+                self.decode_wait_ms,
+                0,
+                MAX_HTTP_TIMEOUT_MS,
+            ),
+            ("http.image_cache_bytes", self.image_cache_bytes, 0, 1 << 40),
         ] {
             if !(min..=max).contains(&value) {
                 return Err(HttpConfigError::OutOfRange {

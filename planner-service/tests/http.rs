@@ -1786,3 +1786,103 @@ async fn slow_and_idle_connections_are_closed_and_extra_ones_refused() {
         .is_some());
     assert!(t0.elapsed() < Duration::from_secs(5), "{:?}", t0.elapsed());
 }
+
+/// A grey PNG of `w` × `h` pixels, all free, compressed to a few KB whatever its size.
+fn blank_png(w: u32, h: u32) -> Vec<u8> {
+    let img = image::GrayImage::from_pixel(w, h, image::Luma([254u8]));
+    let mut png = Vec::new();
+    image::DynamicImage::ImageLuma8(img)
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .unwrap();
+    png
+}
+
+/// Issue 17, item 3: a picture's decode is budgeted from its header before it is decoded, and
+/// a map version's image is rendered once.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn decodes_are_budgeted_and_map_images_rendered_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = config();
+    // 16 MiB for all decodes: a 3000 × 3000 grey picture needs 3000 · 3000 · 2 B = 17.2 MB.
+    cfg.http.decode_budget_bytes = 16 << 20;
+    let server = start(dir.path(), cfg).await;
+    let (url, c) = (server.url(), client());
+    let big = blank_png(3000, 3000);
+    assert!(big.len() < 200_000, "{} bytes", big.len());
+    let form = Form::new()
+        .text("name", "huge")
+        .part("picture", Part::bytes(big).file_name("huge.png"))
+        .text("resolution_m", "0.05");
+    let resp = c
+        .post(format!("{url}/api/v1/maps"))
+        .bearer_auth(TOKEN)
+        .multipart(form)
+        .send()
+        .await
+        .unwrap();
+    let reason = expect_error(resp, StatusCode::PAYLOAD_TOO_LARGE, "too_large").await;
+    assert!(
+        reason.contains("18 MB") && reason.contains("decode_budget_bytes"),
+        "{reason}"
+    );
+    assert_eq!(
+        map_count(&c, &url).await,
+        0,
+        "a refused upload stored something"
+    );
+
+    // Within the budget: stored, and its image rendered on the first request only.
+    let form = Form::new()
+        .text("name", "plan")
+        .part(
+            "picture",
+            Part::bytes(blank_png(400, 300)).file_name("plan.png"),
+        )
+        .text("resolution_m", "0.05");
+    let resp = c
+        .post(format!("{url}/api/v1/maps"))
+        .bearer_auth(TOKEN)
+        .multipart(form)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), StatusCode::CREATED);
+    let image_url = format!("{url}/api/v1/maps/plan/image");
+    let first = c.get(&image_url).send().await.unwrap();
+    assert_eq!(first.status(), StatusCode::OK);
+    let etag = first.headers()["etag"].clone();
+    let first = first.bytes().await.unwrap();
+    let second = c.get(&image_url).send().await.unwrap();
+    assert_eq!(second.headers()["etag"], etag);
+    assert_eq!(second.bytes().await.unwrap(), first);
+    // The client's copy is current: 304, no body.
+    let again = c
+        .get(&image_url)
+        .header("if-none-match", etag.clone())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(again.status(), StatusCode::NOT_MODIFIED);
+    assert!(again.bytes().await.unwrap().is_empty());
+    let metrics = c
+        .get(format!("{url}/metrics"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(
+        metrics.contains("fleet_http_map_image_lookups_total{result=\"hit\"} 1")
+            && metrics.contains("fleet_http_map_image_lookups_total{result=\"miss\"} 1"),
+        "{metrics}"
+    );
+    assert!(
+        metrics.contains(&format!(
+            "fleet_http_decode_budget_available_bytes {}",
+            16 << 20
+        )),
+        "{metrics}"
+    );
+    server.stop().await.unwrap();
+}

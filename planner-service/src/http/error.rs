@@ -16,6 +16,8 @@ use crate::fleet::{ErrorKind, FleetError};
 pub struct ApiError {
     pub status: StatusCode,
     pub reason: String,
+    /// Sent as `Retry-After` (whole seconds) with a `503`.
+    pub retry_after: Option<std::time::Duration>,
 }
 
 #[derive(Serialize)]
@@ -29,6 +31,15 @@ impl ApiError {
         Self {
             status,
             reason: reason.into(),
+            retry_after: None,
+        }
+    }
+
+    /// `503`: the service is busy; the client may try again after `retry_after`.
+    pub fn unavailable(reason: impl Into<String>, retry_after: std::time::Duration) -> Self {
+        Self {
+            retry_after: Some(retry_after),
+            ..Self::new(StatusCode::SERVICE_UNAVAILABLE, reason)
         }
     }
 
@@ -105,7 +116,15 @@ impl IntoResponse for ApiError {
             error: self.code(),
             reason: &reason,
         };
-        (self.status, Json(body)).into_response()
+        let mut resp = (self.status, Json(body)).into_response();
+        if let Some(after) = self.retry_after {
+            let secs = after.as_secs_f64().ceil().max(1.0);
+            if let Ok(v) = axum::http::HeaderValue::from_str(&format!("{secs:.0}")) {
+                resp.headers_mut()
+                    .insert(axum::http::header::RETRY_AFTER, v);
+            }
+        }
+        resp
     }
 }
 

@@ -8,6 +8,7 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
 
 use axum::body::Bytes;
 use axum::extract::multipart::{Multipart, MultipartRejection};
@@ -105,11 +106,13 @@ pub struct ImageQuery {
     _access_token: Option<String>,
 }
 
-/// `GET /api/v1/maps/{name}/image[?version=N]`: the occupancy grid as PNG.
+/// `GET /api/v1/maps/{name}/image[?version=N]`: the occupancy grid as PNG, rendered once per
+/// map version ([`super::images::ImageCache`]); `304` when `If-None-Match` names its id.
 pub async fn image(
     State(state): State<AppState>,
     UrlPath(name): UrlPath<String>,
     query: Result<Query<ImageQuery>, QueryRejection>,
+    headers: axum::http::HeaderMap,
 ) -> Result<Response, ApiError> {
     let Query(q) = query?;
     let name = MapName::new(name)?;
@@ -119,17 +122,29 @@ pub async fn image(
         ));
     }
     let maps = state.maps.clone();
-    let (meta, png) = tokio::task::spawn_blocking(move || {
-        let stored = maps.get(&name, q.version)?;
-        let png = grid_png(&stored.grid)?;
-        Ok::<_, ApiError>((stored.meta, png))
-    })
-    .await??;
-    let mut resp = png_response(&meta_geometry(&meta), png);
+    let meta = tokio::task::spawn_blocking(move || maps.meta(&name, q.version)).await??;
     // The id is content addressed: the same id always has the same picture.
-    if let Ok(v) = HeaderValue::from_str(&format!("\"{}\"", meta.id)) {
-        resp.headers_mut().insert(header::ETAG, v);
+    let etag = HeaderValue::from_str(&format!("\"{}\"", meta.id))
+        .map_err(|e| ApiError::internal(format!("map id is no header value: {e}")))?;
+    if let Some(resp) = super::images::not_modified(headers.get(header::IF_NONE_MATCH), &etag) {
+        return Ok(resp);
     }
+    let png = match state.map_images.get(meta.id.as_str()) {
+        Some(png) => png,
+        None => {
+            let maps = state.maps.clone();
+            let id = meta.id.clone();
+            let png: Arc<[u8]> = tokio::task::spawn_blocking(move || {
+                let stored = maps.get_by_id(&id)?;
+                Ok::<_, ApiError>(grid_png(&stored.grid)?.into())
+            })
+            .await??;
+            state.map_images.insert(meta.id.as_str(), Arc::clone(&png));
+            png
+        }
+    };
+    let mut resp = png_response(&meta_geometry(&meta), png.to_vec());
+    resp.headers_mut().insert(header::ETAG, etag);
     Ok(resp)
 }
 
@@ -140,6 +155,7 @@ pub async fn upload(
     multipart: Result<Multipart, MultipartRejection>,
 ) -> Result<Response, ApiError> {
     let parts = UploadParts::read(multipart?).await?;
+    let _room = state.decodes.admit(parts.decode_cost_bytes()).await?;
     let name_text = parts
         .name
         .clone()
@@ -174,6 +190,7 @@ pub async fn preview(
     if let Some(n) = &parts.name {
         MapName::new(n.clone())?;
     }
+    let _room = state.decodes.admit(parts.decode_cost_bytes()).await?;
     let data_dir = state.data_dir.clone();
     let limits = state.http.import_limits;
     let (geometry, png) = tokio::task::spawn_blocking(move || {
@@ -304,6 +321,15 @@ impl UploadParts {
             }
         }
         Ok(parts)
+    }
+
+    /// Memory decoding the upload's image takes at the peak, from its header; 0 when there is
+    /// no image or its header cannot be read (the import then refuses it before decoding).
+    fn decode_cost_bytes(&self) -> u64 {
+        let Some(file) = self.image.as_ref().or(self.picture.as_ref()) else {
+            return 0;
+        };
+        map_store::ros::decode_cost_bytes(&file.bytes, Path::new(&file.file_name)).unwrap_or(0)
     }
 
     /// Stages the files, imports them with map-store's importer, checks the map's physical

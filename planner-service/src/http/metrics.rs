@@ -76,6 +76,8 @@ pub async fn metrics(State(state): State<AppState>) -> Response {
     let mut out = String::new();
     state.fleet.metrics().render_prometheus(&mut out);
     state.metrics.render_prometheus(&mut out);
+    state.map_images.render_prometheus(&mut out);
+    state.decodes.render_prometheus(&mut out);
     (
         [(
             header::CONTENT_TYPE,

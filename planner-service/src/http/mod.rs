@@ -16,6 +16,7 @@ pub mod conn;
 pub mod error;
 pub mod events;
 pub mod health;
+pub mod images;
 pub mod maps;
 pub mod metrics;
 pub mod openapi;

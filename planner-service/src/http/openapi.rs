@@ -305,7 +305,7 @@ pub fn document() -> Value {
                     "responses": {
                         "201": ok("Stored as a new version.", r("MapMeta")),
                         "200": ok("Identical content was already stored under this name: that version.", r("MapMeta")),
-                        "400": err("BadRequest"), "401": err("Unauthorized"), "413": err("TooLarge")
+                        "400": err("BadRequest"), "401": err("Unauthorized"), "413": err("TooLarge"), "503": err("Busy")
                     }
                 }
             },
@@ -323,7 +323,7 @@ pub fn document() -> Value {
                         },
                         "content": { "image/png": { "schema": { "type": "string", "format": "binary" } } }
                     },
-                    "400": err("BadRequest"), "401": err("Unauthorized"), "413": err("TooLarge")
+                    "400": err("BadRequest"), "401": err("Unauthorized"), "413": err("TooLarge"), "503": err("Busy")
                 }
             } },
             "/api/v1/maps/{name}": { "get": {
@@ -339,7 +339,7 @@ pub fn document() -> Value {
             "/api/v1/maps/{name}/image": { "get": {
                 "summary": "The occupancy grid as PNG (as preview).",
                 "parameters": [name, query_param("version", "Version (default: latest).", json!({ "type": "integer", "minimum": 1, "maximum": u32::MAX }))],
-                "responses": { "200": png("Free white, occupied black, unknown grey; top = +y; x-map-* headers as preview."), "400": err("BadRequest"), "401": err("Unauthorized"), "404": err("NotFound") }
+                "responses": { "200": png("Free white, occupied black, unknown grey; top = +y; x-map-* headers as preview. `ETag` is the map id (content addressed); rendered once per version and kept (`[http] image_cache_bytes`)."), "304": { "description": "`If-None-Match` names this version's ETag: the client's copy is current." }, "400": err("BadRequest"), "401": err("Unauthorized"), "404": err("NotFound") }
             } },
             "/api/v1/tasks": {
                 "get": {
@@ -423,7 +423,8 @@ pub fn document() -> Value {
                 "Unauthorized": { "description": "Missing or wrong token.", "content": { "application/json": { "schema": r("Error") } } },
                 "NotFound": { "description": "Unknown map, version, task or robot.", "content": { "application/json": { "schema": r("Error") } } },
                 "Conflict": { "description": "The task already ended, or the robot is busy or on another map.", "content": { "application/json": { "schema": r("Error") } } },
-                "TooLarge": { "description": "Body over the upload limit or image over the import limits.", "content": { "application/json": { "schema": r("Error") } } }
+                "TooLarge": { "description": "Body over the upload limit, image over the import limits, or a picture whose decode needs more memory than `[http] decode_budget_bytes`.", "content": { "application/json": { "schema": r("Error") } } },
+                "Busy": { "description": "Other floor plans are being decoded and this one did not fit in the decode budget within `[http] decode_wait_ms`; try again after `Retry-After` seconds.", "headers": { "Retry-After": { "schema": { "type": "integer", "minimum": 1 } } }, "content": { "application/json": { "schema": r("Error") } } }
             },
             "schemas": schemas()
         }

@@ -141,6 +141,11 @@ impl Server {
             token: Arc::from(token.as_str()),
             data_dir: Arc::new(opts.data_dir.clone()),
             metrics: Arc::new(HttpMetrics::default()),
+            decodes: super::images::DecodeBudget::new(
+                cfg.http.decode_budget_bytes,
+                std::time::Duration::from_millis(cfg.http.decode_wait_ms),
+            ),
+            map_images: Arc::new(super::images::ImageCache::new(cfg.http.image_cache_bytes)),
             shutdown: shutdown_rx.clone(),
         };
         let app = super::router(state);

@@ -22,6 +22,10 @@ pub struct AppState {
     /// The service's data directory (uploads are staged under `uploads/` in it).
     pub data_dir: Arc<PathBuf>,
     pub metrics: Arc<HttpMetrics>,
+    /// Memory shared by floor-plan decodes ([`super::images`]).
+    pub decodes: super::images::DecodeBudget,
+    /// Rendered map images by map id.
+    pub map_images: Arc<super::images::ImageCache>,
     /// Turns `true` when the server shuts down.
     pub shutdown: watch::Receiver<bool>,
 }
