@@ -26,6 +26,7 @@ use std::sync::Arc;
 use map_core::{classify, CellClass};
 use planning::{Goal, Planner, PlannerConfig, PlanningMap};
 use protocol::Pose2D;
+use rand::seq::SliceRandom;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
@@ -202,9 +203,14 @@ fn person(route: &[(f64, f64)], speed_mps: f64, rng: &mut ChaCha8Rng) -> PersonS
     }
 }
 
-/// Adds one encounter of a random kind to `scenario` on the planned path from `start` to
-/// `goal`; returns its kind, or `None` when it does not fit. `world` is the scenario's world
-/// before the change (walls, furniture and glass that routes and doors must respect).
+/// Draws of one kind's placement before the next kind is tried.
+const DRAWS_PER_KIND: usize = 3;
+
+/// Adds one encounter to `scenario` on the planned path from `start` to `goal`: the kinds in a
+/// random order, each drawn up to [`DRAWS_PER_KIND`] times, the first that fits (a short route
+/// or a narrow one rules some out); returns its kind, or `None` when none fits. `world` is the
+/// scenario's world before the change (walls, furniture and glass that routes and doors must
+/// respect).
 #[allow(clippy::too_many_arguments)]
 pub fn add(
     scenario: &mut Scenario,
@@ -215,12 +221,35 @@ pub fn add(
     goal: (f64, f64),
     rng: &mut ChaCha8Rng,
 ) -> Option<Encounter> {
-    let kind = Encounter::ALL[rng.gen_range(0..Encounter::ALL.len())];
     let mut planner = Planner::new(Arc::clone(planning), planner.clone()).ok()?;
     let path = planner
         .plan(start, Goal::at(goal.0, goal.1).pose_from(start))
         .ok()?;
     let route = Route::of(&path.poses);
+    let mut kinds = Encounter::ALL;
+    kinds.shuffle(rng);
+    for kind in kinds {
+        for _ in 0..DRAWS_PER_KIND {
+            if place(kind, scenario, planning, world, start, goal, &route, rng).is_some() {
+                return Some(kind);
+            }
+        }
+    }
+    None
+}
+
+/// One draw of a `kind` encounter on `route`; `scenario` changes only when it fits.
+#[allow(clippy::too_many_arguments)]
+fn place(
+    kind: Encounter,
+    scenario: &mut Scenario,
+    planning: &Arc<PlanningMap>,
+    world: &World,
+    start: Pose2D,
+    goal: (f64, f64),
+    route: &Route,
+    rng: &mut ChaCha8Rng,
+) -> Option<()> {
     let length_m = route.length_m();
     match kind {
         Encounter::PersonAhead => {
@@ -269,7 +298,7 @@ pub fn add(
                 return None;
             }
             let s = rng.gen_range(4.0..12.0_f64).min(length_m - 2.0);
-            let pane = door_across(&route, s, planning)?;
+            let pane = door_across(route, s, planning)?;
             let r = world.config.base.radius_m + 0.3;
             if pane.shape().distance(start.x_m, start.y_m) < r
                 || pane.shape().distance(goal.0, goal.1) < r
@@ -279,7 +308,7 @@ pub fn add(
             scenario.glass.push(pane);
         }
     }
-    Some(kind)
+    Some(())
 }
 
 /// A glass pane from wall to wall across the path at arc length `s`: the walls of the floor
