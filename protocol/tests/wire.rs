@@ -745,3 +745,53 @@ fn unknown_fields_are_rejected() {
         })
     ));
 }
+
+/// The wire fuzzer's seed corpus (`fuzz/seeds/wire_decode`) is these fixtures as the codec
+/// encodes them now, so the fuzzer starts from messages that decode. After a codec change,
+/// `FLEET_WRITE_FUZZ_SEEDS=1 cargo test -p protocol --test wire fuzz_seeds` rewrites them.
+#[test]
+fn fuzz_seeds_are_the_current_encodings() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/seeds/wire_decode");
+    let seeds: Vec<(&str, Vec<u8>)> = vec![
+        ("scan", encode(&scan()).unwrap()),
+        ("odom", encode(&odom()).unwrap()),
+        ("cmd_vel", encode(&cmd_vel()).unwrap()),
+        ("pose", encode(&pose()).unwrap()),
+        ("status", encode(&status()).unwrap()),
+        ("task_event", encode(&task_event()).unwrap()),
+        ("map_meta", encode(&map_meta()).unwrap()),
+        ("map_grid", encode(&map_grid()).unwrap()),
+        (
+            "camera",
+            // Small pictures: a fuzzer mutates short inputs far faster.
+            encode(&CameraFrame {
+                header: header(5),
+                image: Image::new(8, 6, ImageEncoding::Rgb8, rgb_bytes(8, 6)).unwrap(),
+            })
+            .unwrap(),
+        ),
+        ("intention", encode(&intention(None)).unwrap()),
+        (
+            "intention_lpe",
+            encode(&intention(Some(
+                Image::new(224, 224, ImageEncoding::Png, png_bytes()).unwrap(),
+            )))
+            .unwrap(),
+        ),
+    ];
+    if std::env::var_os("FLEET_WRITE_FUZZ_SEEDS").is_some() {
+        std::fs::create_dir_all(&dir).unwrap();
+        for (name, bytes) in &seeds {
+            std::fs::write(dir.join(format!("{name}.bin")), bytes).unwrap();
+        }
+    }
+    for (name, bytes) in &seeds {
+        let path = dir.join(format!("{name}.bin"));
+        let stored = std::fs::read(&path).unwrap_or_default();
+        assert!(
+            stored == *bytes,
+            "{} is not what the codec writes now; rewrite the seeds: FLEET_WRITE_FUZZ_SEEDS=1 cargo test -p protocol --test wire fuzz_seeds",
+            path.display()
+        );
+    }
+}
