@@ -22,6 +22,12 @@ installed="$(.venv/bin/python -c 'import importlib.metadata as m; print(m.versio
 if [ "$installed" != "$ORT_VERSION" ]; then
   .venv/bin/python -m pip install --quiet --disable-pip-version-check "onnxruntime==${ORT_VERSION}"
 fi
+# schemathesis, for scripts/api-fuzz.sh (the OpenAPI document against what the server accepts).
+SCHEMATHESIS_VERSION="4.32.5"
+installed="$(.venv/bin/python -c 'import importlib.metadata as m; print(m.version("schemathesis"))' 2>/dev/null || true)"
+if [ "$installed" != "$SCHEMATHESIS_VERSION" ]; then
+  .venv/bin/python -m pip install --quiet --disable-pip-version-check "schemathesis==${SCHEMATHESIS_VERSION}"
+fi
 if ! compgen -G ".venv/lib/python3*/site-packages/onnxruntime/capi/libonnxruntime.so*" >/dev/null; then
   echo "error: onnxruntime ${ORT_VERSION} installed, but no libonnxruntime.so* under .venv/lib/python3*/site-packages/onnxruntime/capi/" >&2
   exit 1

@@ -47,6 +47,27 @@ pub enum Command {
     BenchFleet(BenchFleetArgs),
     /// Benchmark task listing and the live-stream snapshot at growing numbers of stored tasks.
     BenchStore(BenchStoreArgs),
+    /// Make a site's Zenoh security folder: a CA, a certificate per process and per robot's
+    /// agent, and the access-control rules (acl.json5); an existing CA and certificates are
+    /// kept, so adding robots re-issues nothing else.
+    Certs(CertsArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct CertsArgs {
+    /// Folder to write (created; an existing site folder is completed).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Site the rules are for: keys under fleet/<site>/.
+    #[arg(long, default_value = map_store::config::DEFAULT_SITE)]
+    pub site: SiteId,
+    /// Robots that get an agent certificate (repeatable or comma-separated).
+    #[arg(long = "robot", value_delimiter = ',')]
+    pub robots: Vec<protocol::RobotId>,
+    /// Host names or addresses the processes are reached on besides loopback (repeatable):
+    /// a session checks a peer's certificate against the endpoint it connects to.
+    #[arg(long = "host")]
+    pub hosts: Vec<String>,
 }
 
 #[derive(Debug, Args)]
@@ -97,6 +118,10 @@ pub struct DemoArgs {
     /// ./models or the user data directory.
     #[arg(long)]
     pub models_dir: Option<PathBuf>,
+    /// Zenoh mutual TLS and access control between the service, the simulator and the agents
+    /// (certificates made once in <data-dir>/zenoh-site; see docs/deploy.md).
+    #[arg(long)]
+    pub secure: bool,
 }
 
 #[derive(Debug, Args)]
@@ -243,7 +268,41 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<()> {
         Command::Demo(args) => demo(args, out),
         Command::BenchFleet(args) => bench_fleet(&args, out),
         Command::BenchStore(args) => bench_store(&args, out),
+        Command::Certs(args) => certs(&args, out),
     }
+}
+
+fn certs(args: &CertsArgs, out: &mut dyn Write) -> anyhow::Result<()> {
+    use protocol::security::{issue, Identity, SiteFiles};
+    let files = SiteFiles::new(&args.out);
+    let report = issue(&files, &args.site, &args.robots, &args.hosts)?;
+    if report.new_ca {
+        writeln!(out, "new site CA: {}", files.ca_cert().display())?;
+    }
+    for identity in &report.issued {
+        writeln!(out, "issued {identity}: {}", files.cert(identity).display())?;
+    }
+    for identity in &report.kept {
+        writeln!(out, "kept   {identity}")?;
+    }
+    writeln!(
+        out,
+        "rules: {} ({} robots)\nkeep {} off the robots; each process gets ca.pem, its own \
+         .pem and .key, and acl.json5:",
+        files.acl().display(),
+        report.robots.len(),
+        files.ca_key().display()
+    )?;
+    let example = Identity::Planner;
+    writeln!(
+        out,
+        "  --zenoh-tls-ca {} --zenoh-tls-cert {} --zenoh-tls-key {} --zenoh-acl {}",
+        files.ca_cert().display(),
+        files.cert(&example).display(),
+        files.key(&example).display(),
+        files.acl().display()
+    )?;
+    Ok(())
 }
 
 fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
@@ -273,6 +332,7 @@ fn demo(args: DemoArgs, out: &mut dyn Write) -> anyhow::Result<()> {
         controllers: args.controllers,
         bin_dir: None,
         models_dir: args.models_dir,
+        secure: args.secure,
     };
     runtime()?.block_on(crate::demo::run(opts, out))
 }

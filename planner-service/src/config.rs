@@ -6,7 +6,7 @@
 //! the environment (`FLEET_*`) and its flags on top of the file (CLI > env > file > defaults).
 
 use std::net::SocketAddr;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use map_store::ImportLimits;
 use serde::{Deserialize, Serialize};
@@ -246,13 +246,20 @@ pub fn validate_token(token: &str) -> Result<(), TokenRejection> {
 pub struct ZenohConfig {
     /// The site: every key is under `fleet/<site>/`.
     pub site: SiteId,
-    /// Endpoints to listen on, e.g. `tcp/0.0.0.0:7447`; empty: Zenoh's default.
+    /// Endpoints to listen on, e.g. `tcp/0.0.0.0:7447`; empty: loopback, an OS-chosen port.
     pub listen: Vec<String>,
     /// Endpoints to connect to (a router, or the robots' peers).
     pub connect: Vec<String>,
     /// Multicast scouting (finds peers on the LAN by itself; off so a stranger's session on
     /// the same network is never picked up).
     pub multicast: bool,
+    /// Mutual TLS: the site CA, this service's certificate and key (PEM; `planner-service
+    /// certs` makes them). All three or none; with them every endpoint must be `tls/…`.
+    pub tls_ca: Option<PathBuf>,
+    pub tls_cert: Option<PathBuf>,
+    pub tls_key: Option<PathBuf>,
+    /// Zenoh access-control rules (`acl.json5` from `planner-service certs`); needs TLS.
+    pub acl: Option<PathBuf>,
 }
 
 impl Default for ZenohConfig {
@@ -262,6 +269,10 @@ impl Default for ZenohConfig {
             listen: Vec::new(),
             connect: Vec::new(),
             multicast: false,
+            tls_ca: None,
+            tls_cert: None,
+            tls_key: None,
+            acl: None,
         }
     }
 }
@@ -282,6 +293,10 @@ impl ZenohConfig {
             listen: self.listen.clone(),
             connect: self.connect.clone(),
             multicast_scouting: self.multicast,
+            tls_ca: self.tls_ca.clone(),
+            tls_cert: self.tls_cert.clone(),
+            tls_key: self.tls_key.clone(),
+            acl: self.acl.clone(),
         }
     }
 
@@ -292,6 +307,10 @@ impl ZenohConfig {
         self.listen = session.listen;
         self.connect = session.connect;
         self.multicast = session.multicast_scouting;
+        self.tls_ca = session.tls_ca;
+        self.tls_cert = session.tls_cert;
+        self.tls_key = session.tls_key;
+        self.acl = session.acl;
     }
 
     /// The Zenoh configuration of the service's peer session.
@@ -534,6 +553,7 @@ mod tests {
             listen: vec![],
             connect: vec!["tcp/10.0.0.2:7447".into()],
             multicast_scouting: true,
+            ..SessionArgs::default()
         });
         assert_eq!(zenoh.listen, ["tcp/0.0.0.0:7447"]);
         assert_eq!(zenoh.connect, ["tcp/10.0.0.2:7447"]);

@@ -20,6 +20,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
 use map_store::{import_into, ImportLimits, MapStore};
+use protocol::security::{Identity, SiteFiles};
 use protocol::{ControllerKind, MapName, Pose2D, RobotId};
 
 use crate::http::{ServeOptions, Server};
@@ -45,6 +46,9 @@ pub struct DemoOptions {
     /// Folder of the network controllers' models (default: looked up, see
     /// [`protocol::data_dirs`]).
     pub models_dir: Option<PathBuf>,
+    /// Zenoh mutual TLS and access control between the service, the simulator and the agents,
+    /// with the site's certificates made (or reused) in `<data_dir>/zenoh-site`.
+    pub secure: bool,
 }
 
 /// Imports `first` and then every ROS floor plan (`*.yaml`) in `dirs`, each named after its
@@ -142,10 +146,34 @@ impl Demo {
             tracing::info!(maps = names.len(), "floor plans preloaded");
         }
         let mut serve = opts.serve.clone();
-        if serve.config.zenoh.listen.is_empty() {
-            serve.config.zenoh.listen = vec!["tcp/127.0.0.1:0".to_string()];
-        }
         let site = serve.config.zenoh.site.clone();
+        let security = if opts.secure {
+            let files = SiteFiles::new(serve.data_dir.join("zenoh-site"));
+            let robots = (1..=opts.robots)
+                .map(|k| RobotId::new(format!("robot_{k}")))
+                .collect::<Result<Vec<_>, _>>()?;
+            let (issue_files, issue_site) = (files.clone(), site.clone());
+            let report = tokio::task::spawn_blocking(move || {
+                protocol::security::issue(&issue_files, &issue_site, &robots, &[])
+            })
+            .await??;
+            tracing::info!(
+                dir = %files.dir.display(),
+                issued = report.issued.len(),
+                kept = report.kept.len(),
+                "zenoh mutual TLS and access control on"
+            );
+            let mut session = serve.config.zenoh.session_args();
+            files.secure(&mut session, &Identity::Planner);
+            serve.config.zenoh.override_with(&session);
+            Some(files)
+        } else {
+            None
+        };
+        let scheme = if security.is_some() { "tls" } else { "tcp" };
+        if serve.config.zenoh.listen.is_empty() {
+            serve.config.zenoh.listen = vec![format!("{scheme}/127.0.0.1:0")];
+        }
         let restart_policy = serve.config.demo.agent_restart;
         let server = Server::start(serve).await?;
         let mut demo = Self {
@@ -158,7 +186,7 @@ impl Demo {
         let endpoints = demo.zenoh_endpoints().await;
         if endpoints.is_empty() {
             demo.stop().await;
-            bail!("the service listens on no tcp endpoint for the robots");
+            bail!("the service listens on no tcp or tls endpoint for the robots");
         }
         let spec = RobotsSpec {
             bin_dir,
@@ -170,6 +198,7 @@ impl Demo {
             controllers: opts.controllers.clone(),
             models_dir: opts.models_dir.clone(),
             roster_timeout: Duration::from_secs(60),
+            security,
         };
         match tokio::task::spawn_blocking(move || Robots::start(&spec)).await {
             Ok(Ok(robots)) => {
@@ -199,7 +228,7 @@ impl Demo {
             .zenoh_locators()
             .await
             .into_iter()
-            .filter(|l| l.starts_with("tcp/"))
+            .filter(|l| l.starts_with("tcp/") || l.starts_with("tls/"))
             .collect()
     }
 

@@ -23,6 +23,7 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use protocol::data_dirs::DataDirError;
+use protocol::security::{Identity, SiteFiles};
 use protocol::{ControllerKind, MapName, Pose2D, RobotId, SiteId};
 use sim::roster::Roster;
 
@@ -295,6 +296,9 @@ pub struct RobotsSpec {
     pub models_dir: Option<PathBuf>,
     /// How long the simulator may take to print its roster.
     pub roster_timeout: Duration,
+    /// The site's certificates and access-control rules (`planner-service certs`): each child
+    /// gets its own identity's certificate; `None`: plain TCP.
+    pub security: Option<SiteFiles>,
 }
 
 impl RobotsSpec {
@@ -318,6 +322,27 @@ impl RobotsSpec {
             controllers: vec![ControllerKind::DynamicWindow],
             models_dir: None,
             roster_timeout: Duration::from_secs(60),
+            security: None,
+        }
+    }
+
+    /// Gives a child the Zenoh TLS and access-control flags of `identity` when the site is
+    /// secured.
+    fn secure(&self, cmd: &mut Command, identity: &Identity) {
+        let Some(files) = &self.security else {
+            return;
+        };
+        let mut session = protocol::SessionArgs::default();
+        files.secure(&mut session, identity);
+        for (flag, path) in [
+            ("--zenoh-tls-ca", &session.tls_ca),
+            ("--zenoh-tls-cert", &session.tls_cert),
+            ("--zenoh-tls-key", &session.tls_key),
+            ("--zenoh-acl", &session.acl),
+        ] {
+            if let Some(path) = path {
+                cmd.arg(flag).arg(path);
+            }
         }
     }
 
@@ -402,6 +427,7 @@ impl Robots {
         for e in &spec.connect {
             cmd.arg("--connect").arg(e);
         }
+        spec.secure(&mut cmd, &Identity::Sim);
         let mut sim = Process::spawn("sim", cmd)?;
         let roster = read_roster(&mut sim, spec.roster_timeout)?;
         sim.stop_collecting();
@@ -545,6 +571,7 @@ fn agent_command(
     for e in &spec.connect {
         cmd.arg("--connect").arg(e);
     }
+    spec.secure(&mut cmd, &Identity::Agent(id.clone()));
     cmd
 }
 
@@ -662,6 +689,31 @@ mod tests {
         assert_eq!(at("--map"), "junctions");
         assert_eq!(at("--connect"), "tcp/127.0.0.1:7447");
         assert!(args.iter().any(|a| a == "--no-multicast"));
+        assert!(!args.iter().any(|a| a.starts_with("--zenoh-tls")));
+
+        // A secured site: the agent presents its own robot's certificate.
+        let mut secured = s.clone();
+        secured.security = Some(SiteFiles::new("/site"));
+        let cmd = agent_command(
+            Path::new("robot-agent"),
+            &secured,
+            &RobotId::new("robot_2").unwrap(),
+            pose,
+            ControllerKind::Lpe,
+            None,
+        );
+        let args: Vec<String> = cmd
+            .get_args()
+            .map(|a| a.to_string_lossy().into_owned())
+            .collect();
+        let at = |flag: &str| {
+            let i = args.iter().position(|a| a == flag).unwrap();
+            args[i + 1].clone()
+        };
+        assert_eq!(at("--zenoh-tls-cert"), "/site/agent.robot_2.pem");
+        assert_eq!(at("--zenoh-tls-key"), "/site/agent.robot_2.key");
+        assert_eq!(at("--zenoh-tls-ca"), "/site/ca.pem");
+        assert_eq!(at("--zenoh-acl"), "/site/acl.json5");
     }
 
     #[test]

@@ -11,7 +11,7 @@ use planner_service::config::ServiceConfig;
 use planner_service::http::{ServeOptions, Server};
 use reqwest::multipart::{Form, Part};
 use reqwest::StatusCode;
-use serde_json::Value;
+use serde_json::{json, Value};
 
 const TOKEN: &str = "test-token-0123456789";
 
@@ -338,6 +338,11 @@ async fn bad_uploads_are_refused_and_store_nothing() {
             "bad origin",
             picture_form("p", "testmap.png", "0.1").text("origin_y_m", "north"),
             "origin_y_m",
+        ),
+        (
+            "ROS map with a picture's origin",
+            ros(yaml.clone()).text("origin_x_m", "1.0"),
+            "origin_x_m",
         ),
         (
             "unknown part",
@@ -1564,6 +1569,92 @@ async fn the_bearer_scheme_is_case_insensitive() {
     }
     assert_eq!(map_count(&c, &url).await, 4);
     server.stop().await.unwrap();
+}
+
+/// The cursor's pattern in the OpenAPI document admits exactly the cursors the server decodes,
+/// and the upload body's `oneOf` admits exactly the part combinations the server takes.
+#[test]
+fn openapi_patterns_and_upload_shapes_match_the_server() {
+    use planner_service::fleet::Cursor;
+    use protocol::TaskId;
+    let doc = planner_service::http::openapi::document();
+    let cursor = &doc["paths"]["/api/v1/tasks"]["get"]["parameters"][4];
+    assert_eq!(cursor["name"], "cursor");
+    let valid = jsonschema::validator_for(&cursor["schema"]).unwrap();
+    let long_id = "Z9_.-".repeat(12) + "abcd";
+    for (created_ns, id) in [
+        (0_u64, "t-1"),
+        (u64::MAX, "a"),
+        (1_763_000_000_000_000_000, long_id.as_str()),
+        (42, "-_"),
+    ] {
+        let text = Cursor {
+            created_ns,
+            id: TaskId::new(id.to_string()).unwrap(),
+        }
+        .encode();
+        assert!(valid.is_valid(&json!(text)), "{text}");
+        assert!(Cursor::decode(&text).is_some(), "{text}");
+    }
+    let upper = Cursor {
+        created_ns: 10,
+        id: TaskId::new("Task-1".to_string()).unwrap(),
+    }
+    .encode()
+    .to_uppercase();
+    for bad in [
+        "000000000000000000".to_string(),               // id byte 0x00
+        "0000000000000000".to_string(),                 // no id
+        "00000000000000002e61".to_string(),             // id starts with '.'
+        "0000000000000000616".to_string(),              // odd length
+        format!("0000000000000000{}", "61".repeat(65)), // id too long
+        "0000000000000000612f".to_string(),             // '/' in the id
+        upper,
+    ] {
+        assert!(!valid.is_valid(&json!(bad)), "{bad}");
+        assert!(Cursor::decode(&bad).is_none(), "{bad}");
+    }
+
+    let upload = &doc["paths"]["/api/v1/maps"]["post"]["requestBody"]["content"]
+        ["multipart/form-data"]["schema"];
+    let valid = jsonschema::validator_for(upload).unwrap();
+    let shape = |parts: &[&str]| {
+        let mut body = serde_json::Map::new();
+        for p in parts {
+            let v = if p.ends_with("_m") {
+                json!(0.05)
+            } else {
+                json!("x")
+            };
+            body.insert((*p).to_string(), v);
+        }
+        serde_json::Value::Object(body)
+    };
+    for ok in [
+        &["name", "yaml", "image"][..],
+        &["name", "picture", "resolution_m"],
+        &[
+            "name",
+            "picture",
+            "resolution_m",
+            "origin_x_m",
+            "origin_y_m",
+        ],
+    ] {
+        assert!(valid.is_valid(&shape(ok)), "{ok:?}");
+    }
+    for bad in [
+        &["name", "yaml", "image", "picture"][..],
+        &["name", "yaml", "image", "origin_x_m"],
+        &["name", "yaml", "image", "resolution_m"],
+        &["name", "picture"],
+        &["name", "yaml"],
+        &["name", "image"],
+        &["name"],
+        &["yaml", "image"],
+    ] {
+        assert!(!valid.is_valid(&shape(bad)), "{bad:?}");
+    }
 }
 
 #[test]

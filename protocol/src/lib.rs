@@ -57,6 +57,11 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 //!
+//! # Security
+//!
+//! [`security`]: each process's certificate from the site's CA (mutual TLS) and Zenoh access
+//! control binding each identity to the keys of the table above that it may publish or read.
+//!
 //! # Conventions
 //!
 //! SI units with the unit in the field name (`_m`, `_mps`, `_radps`, `_rad`, `_ns`, `_ms`, `_px`),
@@ -69,6 +74,7 @@ pub mod ids;
 pub mod keys;
 pub mod lpe;
 pub mod messages;
+pub mod security;
 #[cfg(feature = "cli")]
 pub mod telemetry;
 pub mod zenoh_io;

@@ -5,6 +5,8 @@
 //! `application/json`, framed kinds `application/octet-stream` with schema
 //! `intention-fleet/<kind>`, so tools on the wire can tell payloads apart without decoding them.
 
+use std::path::{Path, PathBuf};
+
 use zenoh::bytes::Encoding;
 use zenoh::key_expr::KeyExpr;
 use zenoh::pubsub::Publisher;
@@ -109,6 +111,13 @@ pub enum SessionError {
         value: String,
         reason: String,
     },
+    /// A TLS or access-control file that cannot be read; `field` is the setting naming it.
+    #[error("cannot read zenoh {field} {}: {reason}", path.display())]
+    File {
+        field: &'static str,
+        path: PathBuf,
+        reason: String,
+    },
     #[error("cannot open zenoh session: {0}")]
     Open(zenoh::Error),
     #[error("zenoh session listens on no locator")]
@@ -120,7 +129,13 @@ pub enum SessionError {
 ///
 /// Fleet processes find each other through the endpoints they are given (a router between
 /// hosts, loopback on one host). Multicast scouting is off unless asked for, so a test or a demo
-/// never picks up a stranger's session on the same network.
+/// never picks up a stranger's session on the same network, and a session given no listen
+/// endpoint listens on loopback only (Zenoh's own default is every interface).
+///
+/// With `tls_ca`, `tls_cert` and `tls_key` the session speaks mutual TLS only: it accepts peers
+/// whose certificate the site CA signed and presents its own; every endpoint must then be
+/// `tls/…`. `acl` loads Zenoh access-control rules that match those certificates' names (see
+/// [`crate::security`]).
 ///
 /// With the `cli` feature this is also a clap [`Args`](clap::Args) group that every binary
 /// flattens: `--zenoh-listen ENDPOINT`, `--zenoh-connect ENDPOINT` (both repeatable) and
@@ -149,6 +164,34 @@ pub struct SessionArgs {
     )]
     #[serde(rename = "multicast", alias = "multicast_scouting")]
     pub multicast_scouting: bool,
+    /// The site CA's certificate (PEM) that peers' certificates must chain to; with
+    /// --zenoh-tls-cert and --zenoh-tls-key it turns on mutual TLS (tls/ endpoints only).
+    #[cfg_attr(
+        feature = "cli",
+        arg(long = "zenoh-tls-ca", value_name = "PEM", requires_all = ["tls_cert", "tls_key"])
+    )]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tls_ca: Option<PathBuf>,
+    /// This process's certificate (PEM), signed by the site CA.
+    #[cfg_attr(feature = "cli", arg(long = "zenoh-tls-cert", value_name = "PEM"))]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tls_cert: Option<PathBuf>,
+    /// This process's private key (PEM).
+    #[cfg_attr(feature = "cli", arg(long = "zenoh-tls-key", value_name = "PEM"))]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tls_key: Option<PathBuf>,
+    /// Zenoh access-control rules (JSON5, e.g. acl.json5 from `planner-service certs`); they
+    /// match certificate names, so they need TLS.
+    #[cfg_attr(feature = "cli", arg(long = "zenoh-acl", value_name = "JSON5"))]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub acl: Option<PathBuf>,
+}
+
+/// The TLS files of a session, all three present.
+struct TlsFiles<'a> {
+    ca: &'a Path,
+    cert: &'a Path,
+    key: &'a Path,
 }
 
 impl SessionArgs {
@@ -165,7 +208,7 @@ impl SessionArgs {
         Self {
             listen: listen.to_vec(),
             connect: connect.to_vec(),
-            multicast_scouting: false,
+            ..Self::default()
         }
     }
 
@@ -180,27 +223,101 @@ impl SessionArgs {
             self.connect.clone_from(&flags.connect);
         }
         self.multicast_scouting |= flags.multicast_scouting;
+        for (mine, theirs) in [
+            (&mut self.tls_ca, &flags.tls_ca),
+            (&mut self.tls_cert, &flags.tls_cert),
+            (&mut self.tls_key, &flags.tls_key),
+            (&mut self.acl, &flags.acl),
+        ] {
+            if theirs.is_some() {
+                mine.clone_from(theirs);
+            }
+        }
     }
 
-    /// The Zenoh configuration: peer mode, these endpoints, multicast scouting as asked.
+    /// True when the session speaks mutual TLS.
+    #[must_use]
+    pub fn is_tls(&self) -> bool {
+        self.tls_ca.is_some() || self.tls_cert.is_some() || self.tls_key.is_some()
+    }
+
+    /// The TLS files, checked readable: none, or all three.
+    fn tls_files(&self) -> Result<Option<TlsFiles<'_>>, SessionError> {
+        let fields = [
+            ("tls_ca", &self.tls_ca),
+            ("tls_cert", &self.tls_cert),
+            ("tls_key", &self.tls_key),
+        ];
+        if !self.is_tls() {
+            return Ok(None);
+        }
+        for (field, path) in fields {
+            let Some(path) = path else {
+                return Err(SessionError::Config {
+                    field,
+                    value: "(missing)".into(),
+                    reason: "mutual TLS needs tls_ca, tls_cert and tls_key together".into(),
+                });
+            };
+            std::fs::File::open(path).map_err(|e| SessionError::File {
+                field,
+                path: path.clone(),
+                reason: e.to_string(),
+            })?;
+        }
+        match (&self.tls_ca, &self.tls_cert, &self.tls_key) {
+            (Some(ca), Some(cert), Some(key)) => Ok(Some(TlsFiles { ca, cert, key })),
+            _ => Ok(None),
+        }
+    }
+
+    /// The listen endpoints Zenoh gets: those given, or loopback with an OS-chosen port.
+    fn listen_endpoints(&self) -> Vec<String> {
+        if self.listen.is_empty() {
+            let scheme = if self.is_tls() { "tls" } else { "tcp" };
+            vec![format!("{scheme}/127.0.0.1:0")]
+        } else {
+            self.listen.clone()
+        }
+    }
+
+    /// The Zenoh configuration: peer mode, these endpoints (listening on loopback when none is
+    /// given), multicast scouting as asked, mutual TLS and access control when configured.
     ///
     /// # Errors
-    /// [`SessionError::Endpoint`] naming the first endpoint Zenoh cannot parse,
+    /// [`SessionError::Endpoint`] naming the first endpoint Zenoh cannot parse or that does not
+    /// match the TLS setting, [`SessionError::File`] for a TLS or rules file that cannot be read,
     /// [`SessionError::Config`] for a setting Zenoh refused.
     pub fn config(&self) -> Result<zenoh::Config, SessionError> {
         let mut config = zenoh::Config::default();
+        let tls = self.tls_files()?;
+        let listen = self.listen_endpoints();
         for (field, path, endpoints) in [
-            ("listen", "listen/endpoints", &self.listen),
+            ("listen", "listen/endpoints", &listen),
             ("connect", "connect/endpoints", &self.connect),
         ] {
             for endpoint in endpoints {
-                endpoint.parse::<zenoh::config::EndPoint>().map_err(|e| {
+                let parsed = endpoint.parse::<zenoh::config::EndPoint>().map_err(|e| {
                     SessionError::Endpoint {
                         field,
                         endpoint: endpoint.clone(),
                         reason: e.to_string(),
                     }
                 })?;
+                let is_tls = parsed.protocol().as_str() == "tls";
+                if tls.is_some() != is_tls {
+                    return Err(SessionError::Endpoint {
+                        field,
+                        endpoint: endpoint.clone(),
+                        reason: if is_tls {
+                            "a tls/ endpoint needs tls_ca, tls_cert and tls_key".into()
+                        } else {
+                            "mutual TLS is on: every endpoint must be tls/, so that nothing \
+                             unauthenticated can connect"
+                                .into()
+                        },
+                    });
+                }
             }
             if endpoints.is_empty() {
                 continue;
@@ -230,7 +347,71 @@ impl SessionArgs {
                 value: multicast.into(),
                 reason: e.to_string(),
             })?;
+        if let Some(tls) = &tls {
+            Self::configure_tls(&mut config, tls)?;
+        }
+        if let Some(path) = &self.acl {
+            if tls.is_none() {
+                return Err(SessionError::Config {
+                    field: "acl",
+                    value: path.display().to_string(),
+                    reason: "access-control rules match certificate names: they need tls_ca, \
+                             tls_cert and tls_key"
+                        .into(),
+                });
+            }
+            let rules = std::fs::read_to_string(path).map_err(|e| SessionError::File {
+                field: "acl",
+                path: path.clone(),
+                reason: e.to_string(),
+            })?;
+            config
+                .insert_json5("access_control", &rules)
+                .map_err(|e| SessionError::Config {
+                    field: "access_control",
+                    value: path.display().to_string(),
+                    reason: e.to_string(),
+                })?;
+        }
         Ok(config)
+    }
+
+    /// Mutual TLS on both ends of every link: the same certificate listens and connects, and a
+    /// peer's name is checked against the endpoint it was reached on.
+    fn configure_tls(config: &mut zenoh::Config, tls: &TlsFiles<'_>) -> Result<(), SessionError> {
+        let path_value =
+            |path: &Path| serde_json::to_string(&path.display().to_string()).unwrap_or_default();
+        let settings = [
+            ("transport/link/tls/root_ca_certificate", path_value(tls.ca)),
+            (
+                "transport/link/tls/listen_certificate",
+                path_value(tls.cert),
+            ),
+            ("transport/link/tls/listen_private_key", path_value(tls.key)),
+            (
+                "transport/link/tls/connect_certificate",
+                path_value(tls.cert),
+            ),
+            (
+                "transport/link/tls/connect_private_key",
+                path_value(tls.key),
+            ),
+            ("transport/link/tls/enable_mtls", "true".to_string()),
+            (
+                "transport/link/tls/verify_name_on_connect",
+                "true".to_string(),
+            ),
+        ];
+        for (field, value) in settings {
+            config
+                .insert_json5(field, &value)
+                .map_err(|e| SessionError::Config {
+                    field,
+                    value: value.clone(),
+                    reason: e.to_string(),
+                })?;
+        }
+        Ok(())
     }
 
     /// Opens the session.
@@ -242,9 +423,9 @@ impl SessionArgs {
         let config = self.config()?;
         if self.listen.is_empty() && self.connect.is_empty() && !self.multicast_scouting {
             tracing::warn!(
-                "zenoh session without endpoints and with multicast scouting off: it finds no \
-                 peers by itself (give --zenoh-connect, --zenoh-listen or \
-                 --zenoh-multicast-scouting)"
+                "zenoh session without endpoints and with multicast scouting off: it listens on \
+                 loopback only and finds no peers by itself (give --zenoh-connect, \
+                 --zenoh-listen or --zenoh-multicast-scouting)"
             );
         }
         zenoh::open(config).await.map_err(SessionError::Open)
@@ -399,6 +580,7 @@ mod session_args_tests {
             listen: vec![],
             connect: vec!["tcp/10.0.0.9:7447".to_string()],
             multicast_scouting: true,
+            ..SessionArgs::default()
         });
         assert_eq!(file.listen, ["tcp/0.0.0.0:7447"]);
         assert_eq!(file.connect, ["tcp/10.0.0.9:7447"]);

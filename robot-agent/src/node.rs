@@ -78,6 +78,7 @@ pub fn zenoh_config(
         listen: listen.to_vec(),
         connect: connect.to_vec(),
         multicast_scouting,
+        ..protocol::SessionArgs::default()
     }
     .config()
     .map_err(|e| NodeError::Zenoh {

@@ -143,9 +143,11 @@ impl Service {
         robots: usize,
         token: &str,
         config: Option<&Path>,
+        extra_args: &[&str],
     ) -> Result<Self> {
         let mut cmd = Command::new(bins.join("planner-service"));
         cmd.arg("demo")
+            .args(extra_args)
             .arg("--listen")
             .arg("127.0.0.1:0")
             .arg("--data-dir")

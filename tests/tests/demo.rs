@@ -31,6 +31,7 @@ fn a_killed_agent_is_restarted_and_its_task_resumes_and_completes() {
         1,
         TOKEN,
         Some(&config),
+        &[],
     )
     .unwrap();
     assert!(demo.zenoh.starts_with("tcp/127.0.0.1:"), "{}", demo.zenoh);
@@ -107,4 +108,47 @@ fn a_killed_agent_is_restarted_and_its_task_resumes_and_completes() {
         (x - 9.0).hypot(y - 4.0) < 0.6,
         "robot_1 ended at ({x}, {y})"
     );
+}
+
+#[test]
+fn a_secured_demo_drives_over_mutual_tls_with_access_control() {
+    let bins = bin_dir().unwrap();
+    let data = tempfile::tempdir().unwrap();
+    let scenario = repo_root().join("sim/scenarios/task_a.yaml");
+    let data_dir = data.path().join("data");
+    let demo =
+        Service::start_demo(&bins, &data_dir, &scenario, 1, TOKEN, None, &["--secure"]).unwrap();
+    // The robots' network is TLS on loopback only, with the site's certificates and rules.
+    assert!(demo.zenoh.starts_with("tls/127.0.0.1:"), "{}", demo.zenoh);
+    let site = data_dir.join("zenoh-site");
+    for file in [
+        "ca.pem",
+        "planner.pem",
+        "sim.pem",
+        "agent.robot_1.pem",
+        "acl.json5",
+    ] {
+        assert!(site.join(file).is_file(), "{file} missing");
+    }
+    // Poses, status and liveliness (the agent's) reach the planner; intentions (the planner's)
+    // reach the agent and commands (the agent's) the simulated base: the task completes.
+    demo.wait_for("/api/v1/robots", Duration::from_secs(90), |v| {
+        robot(v, "robot_1")
+            .and_then(|r| (r["online"] == true && r["pose"].is_object()).then_some(()))
+    })
+    .unwrap();
+    let (status, task) = demo
+        .post(
+            "/api/v1/tasks",
+            &json!({"map": "junctions", "robot_id": "robot_1", "goals": [{"x_m": 9.0, "y_m": 4.0}]}),
+        )
+        .unwrap();
+    assert_eq!(status, 201, "{task}");
+    let id = task["id"].as_str().unwrap().to_string();
+    demo.wait_for(
+        &format!("/api/v1/tasks/{id}"),
+        Duration::from_secs(180),
+        |t| (state_kind(t) == "completed").then_some(()),
+    )
+    .unwrap();
 }

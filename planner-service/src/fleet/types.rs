@@ -183,10 +183,24 @@ impl Cursor {
         hex::encode(bytes)
     }
 
-    /// Parses [`Cursor::encode`]'s form; `None` for anything else.
+    /// [`Cursor::encode`]'s form as a regular expression (the OpenAPI document states it, so a
+    /// generated cursor that matches it is one the server takes): 16 lower-case hex digits of
+    /// time, then the id's bytes in lower-case hex (A-Z a-z 0-9 _ . -, not starting with '.').
+    pub const PATTERN: &'static str = concat!(
+        "^[0-9a-f]{16}",
+        "(?:2d|3[0-9]|4[1-9a-f]|5[0-9af]|6[1-9a-f]|7[0-9a])",
+        "(?:2[de]|3[0-9]|4[1-9a-f]|5[0-9af]|6[1-9a-f]|7[0-9a]){0,63}$"
+    );
+
+    /// Parses [`Cursor::encode`]'s form (lower-case hex only, as [`Cursor::PATTERN`] says);
+    /// `None` for anything else.
     #[must_use]
     pub fn decode(text: &str) -> Option<Self> {
-        if text.len() > Self::MAX_TEXT_LEN {
+        if text.len() > Self::MAX_TEXT_LEN
+            || !text
+                .bytes()
+                .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
+        {
             return None;
         }
         let bytes = hex::decode(text).ok()?;

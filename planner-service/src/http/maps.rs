@@ -368,10 +368,17 @@ impl UploadParts {
     ) -> Result<Imported, ApiError> {
         let (mut imported, uploaded_name) = match (&self.yaml, &self.image, &self.picture) {
             (Some(yaml), Some(image), None) => {
-                if self.resolution_m.is_some() {
-                    return Err(ApiError::bad_request(
-                        "part `resolution_m` belongs to a picture upload; a ROS map gives it in its YAML",
-                    ));
+                let picture_part = [
+                    ("resolution_m", &self.resolution_m),
+                    ("origin_x_m", &self.origin_x_m),
+                    ("origin_y_m", &self.origin_y_m),
+                ]
+                .into_iter()
+                .find_map(|(part, v)| v.as_ref().map(|_| part));
+                if let Some(part) = picture_part {
+                    return Err(ApiError::bad_request(format!(
+                        "part `{part}` belongs to a picture upload; a ROS map gives it in its YAML"
+                    )));
                 }
                 let yaml_path = staging.write_ros(yaml, image)?;
                 let imported = import_file(&yaml_path, None, limits)?;

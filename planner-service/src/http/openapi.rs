@@ -73,6 +73,16 @@ fn upload_body(name_required: bool) -> Value {
             "type": "object",
             "description": "Either `yaml` + `image` (a ROS map_server map) or `picture` + `resolution_m` (a floor-plan picture).",
             "required": required,
+            // The two kinds exclude each other: the server refuses a mix with a 400.
+            "oneOf": [
+                { "title": "ROS map", "required": ["yaml", "image"], "not": { "anyOf": [
+                    { "required": ["picture"] }, { "required": ["resolution_m"] },
+                    { "required": ["origin_x_m"] }, { "required": ["origin_y_m"] }
+                ] } },
+                { "title": "Floor-plan picture", "required": ["picture", "resolution_m"], "not": { "anyOf": [
+                    { "required": ["yaml"] }, { "required": ["image"] }
+                ] } }
+            ],
             "properties": {
                 "name": with_description(map_name(), "Map name: 1-51 characters of [A-Za-z0-9_.-], not starting with a dot."),
                 "yaml": { "type": "string", "format": "binary", "description": "ROS map_server YAML; its `image` entry is replaced by the `image` part." },
@@ -349,7 +359,7 @@ pub fn document() -> Value {
                         query_param("robot_id", "Only tasks of this robot.", id_pattern()),
                         query_param("map", "Only tasks on this map.", map_name()),
                         query_param("limit", "At most this many (default 100).", json!({ "type": "integer", "minimum": 1, "maximum": 1000 })),
-                        query_param("cursor", "Start after this task: the `Next-Cursor` header of the previous page (opaque; other values are a 400). Combine with the same filters.", json!({ "type": "string", "pattern": "^[0-9a-f]+$", "minLength": 18, "maxLength": crate::fleet::Cursor::MAX_TEXT_LEN }))
+                        query_param("cursor", "Start after this task: the `Next-Cursor` header of the previous page (opaque: a value matching the pattern is a position in the newest-first order; other values are a 400). Combine with the same filters.", json!({ "type": "string", "pattern": crate::fleet::Cursor::PATTERN, "minLength": 18, "maxLength": crate::fleet::Cursor::MAX_TEXT_LEN }))
                     ],
                     "responses": { "200": {
                         "description": "Tasks, newest first (by creation time, then id). Each page costs about `limit` lookups, whatever the number of tasks stored.",
