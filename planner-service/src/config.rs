@@ -15,7 +15,7 @@ use crate::fleet::FleetConfig;
 use crate::restart::{RestartPolicy, RestartPolicyError};
 use planning::intention::dlm::DlmParamsError;
 use planning::intention::{DlmParams, LpeParams};
-use planning::{PlanError, PlannerConfig};
+use planning::{PlanError, PlannerConfig, ReuseParams};
 use protocol::{LpeParamsError, SessionArgs, SessionError, SiteId};
 
 /// The whole configuration file.
@@ -25,6 +25,8 @@ pub struct ServiceConfig {
     pub planner: PlannerConfig,
     pub dlm: DlmParams,
     pub lpe: LpeParams,
+    /// When a robot's previous plan answers instead of a new search (`[path_reuse]`).
+    pub path_reuse: ReuseParams,
     pub http: HttpConfig,
     pub zenoh: ZenohConfig,
     /// The fleet core (`[fleet]`): goal tolerance, timeouts of silent robots and paused tasks.
@@ -374,6 +376,7 @@ impl ServiceConfig {
             goal_tolerance_m: self.fleet.goal_tolerance_m,
             path_spacing_m: self.fleet.intention_path_spacing_m,
             trail_poses: self.fleet.trail_poses,
+            reuse: self.path_reuse.clone(),
         }
     }
 
@@ -413,6 +416,7 @@ impl ServiceConfig {
         self.planner.validate()?;
         self.dlm.validate()?;
         self.lpe.validate()?;
+        self.path_reuse.validate()?;
         self.http.validate()?;
         self.zenoh.session_config()?;
         self.fleet.validate()?;

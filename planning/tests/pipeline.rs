@@ -134,3 +134,126 @@ fn a_bad_configuration_is_refused_with_its_field() {
     let err = IntentionPlanner::new(map, config).err().expect("refused");
     assert!(err.to_string().contains("goal_tolerance_m"), "{err}");
 }
+
+/// The point `d_m` along `path` (linear between poses, the segment's heading).
+fn along(path: &[Pose2D], mut d_m: f64) -> Pose2D {
+    for w in path.windows(2) {
+        let seg = w[0].distance_m(&w[1]);
+        if seg > 1e-9 && d_m <= seg {
+            let t = d_m / seg;
+            let yaw = (w[1].y_m - w[0].y_m).atan2(w[1].x_m - w[0].x_m);
+            return Pose2D::new(
+                w[0].x_m + t * (w[1].x_m - w[0].x_m),
+                w[0].y_m + t * (w[1].y_m - w[0].y_m),
+                yaw,
+            );
+        }
+        d_m -= seg;
+    }
+    *path.last().unwrap()
+}
+
+#[test]
+fn a_kept_plan_answers_like_a_new_search_while_the_robot_follows_it() {
+    let fresh_config = IntentionConfig::default();
+    let mut reuse_config = IntentionConfig::default();
+    reuse_config.reuse.enabled = true;
+    let map =
+        Arc::new(PlanningMap::new(test_support::nav2_map("depot"), &fresh_config.planner).unwrap());
+    let pairs = sample_pairs(&map, 6, 23, 6.0, "depot").unwrap();
+    let mut fresh = IntentionPlanner::new(Arc::clone(&map), fresh_config).unwrap();
+    let mut kept = IntentionPlanner::new(Arc::clone(&map), reuse_config).unwrap();
+    let (mut cycles, mut same_dlm, mut reused, mut longer) = (0_u32, 0_u32, 0_u32, 0_u32);
+    for (k, (start, end)) in pairs.iter().enumerate() {
+        let goals = [Goal::at(end.x_m, end.y_m)];
+        let progress = GoalProgress::new(&goals, 0);
+        let mut robot = *start;
+        for step in 0..400_u64 {
+            // AMCL-like jitter on the pose the robot reports (deterministic).
+            let jitter = ((step * 7 + k as u64) as f64).sin();
+            let reported = Pose2D::new(
+                robot.x_m + 0.03 * jitter,
+                robot.y_m - 0.03 * jitter,
+                robot.yaw_rad + 0.03 * jitter,
+            );
+            let pose = estimate(reported, step);
+            let (Answer::Heading { plan: a, .. }, Answer::Heading { plan: b, .. }) = (
+                fresh.answer(&pose, &progress, false),
+                kept.answer(&pose, &progress, false),
+            ) else {
+                break;
+            };
+            let (Ok(a), Ok(b)) = (a, b) else { break };
+            cycles += 1;
+            same_dlm += u32::from(a.dlm == b.dlm);
+            reused += u32::from(b.reused);
+            assert!(!a.reused, "reuse is off by default");
+            assert!(
+                b.path[0].distance_m(&reported) < 1e-9,
+                "the path starts at the robot"
+            );
+            // How much longer the kept route is than a new search from here (a search may find
+            // a shortcut that only shows from further along; max_cycles bounds how long).
+            longer += u32::from(b.length_m > 1.2 * a.length_m + 0.1);
+            // 0.5 m/s at 10 Hz along the path the robot was sent.
+            robot = along(&b.path, 0.05);
+        }
+    }
+    println!(
+        "{cycles} cycles: same DLM {same_dlm}, kept plan answered {reused}, kept route over 1.2x a new search's {longer}"
+    );
+    assert!(cycles > 300, "{cycles} cycles");
+    let same = f64::from(same_dlm) / f64::from(cycles);
+    let kept_share = f64::from(reused) / f64::from(cycles);
+    // Measured 0.952 (1561 of 1639 cycles); issue 16's target is 0.99, not reached yet (where
+    // the two differ has not been analysed).
+    assert!(same >= 0.93, "same DLM in {same:.3} of {cycles} cycles");
+    assert!(
+        kept_share >= 0.8,
+        "kept plan answered {kept_share:.3} of {cycles} cycles"
+    );
+}
+
+#[test]
+fn a_kept_plan_is_dropped_off_its_corridor_for_a_new_goal_and_after_max_cycles() {
+    let mut config = IntentionConfig::default();
+    config.reuse.enabled = true;
+    config.reuse.max_cycles = 3;
+    let map = Arc::new(PlanningMap::new(test_support::nav2_map("depot"), &config.planner).unwrap());
+    let (start, end) = sample_pairs(&map, 1, 5, 6.0, "depot").unwrap()[0];
+    let mut p = IntentionPlanner::new(Arc::clone(&map), config).unwrap();
+    let goals = [Goal::at(end.x_m, end.y_m)];
+    let plan = |p: &mut IntentionPlanner, pose: Pose2D, goals: &[Goal]| match p.answer(
+        &estimate(pose, 0),
+        &GoalProgress::new(goals, 0),
+        false,
+    ) {
+        Answer::Heading { plan, .. } => plan.unwrap(),
+        Answer::Done => panic!("not done at {pose:?}"),
+    };
+    let first = plan(&mut p, start, &goals);
+    assert!(!first.reused, "the first answer is a search");
+    let on_path = along(&first.path, 0.1);
+    // Three reused answers, then a search (max_cycles = 3).
+    let kinds: Vec<bool> = (0..4)
+        .map(|_| plan(&mut p, on_path, &goals).reused)
+        .collect();
+    assert_eq!(kinds, [true, true, true, false]);
+    assert!(plan(&mut p, on_path, &goals).reused);
+    // Turned around: off the corridor's heading.
+    let turned = Pose2D::new(on_path.x_m, on_path.y_m, on_path.yaw_rad + 2.0);
+    assert!(!plan(&mut p, turned, &goals).reused);
+    assert!(
+        plan(&mut p, turned, &goals).reused,
+        "the new search is kept"
+    );
+    // Another goal: a new search.
+    let other = [Goal::at(start.x_m, start.y_m)];
+    let far = along(&first.path, 1.0);
+    assert!(!plan(&mut p, far, &other).reused);
+    // A bad corridor is refused with its field.
+    let mut bad = IntentionConfig::default();
+    bad.reuse.corridor_m = f64::NAN;
+    let err = IntentionPlanner::new(map, bad).err().expect("refused");
+    assert!(err.to_string().contains("reuse.corridor_m"), "{err}");
+}

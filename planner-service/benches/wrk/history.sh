@@ -13,7 +13,6 @@ port="${PORT:-18081}"
 stored="${STORED:-36800}"
 duration="${DURATION:-10s}"
 export FLEET_TOKEN="wrk-bench-token-0123456789"
-export STORE_PER_THREAD=$(( (stored + 1) / 2 ))
 data="$(mktemp -d)"
 "$bin" serve --listen "127.0.0.1:$port" --data-dir "$data" --zenoh-listen tcp/127.0.0.1:0 >"$data/serve.log" 2>&1 &
 pid=$!
@@ -23,7 +22,12 @@ auth=(-H "Authorization: Bearer $FLEET_TOKEN")
 curl -sf "${auth[@]}" -F name=depot \
   -F "yaml=@$maps/depot.yaml" -F "image=@$maps/depot.pgm" "http://127.0.0.1:$port/api/v1/maps" >/dev/null
 echo "## filling the store: $stored tasks through POST /api/v1/tasks"
-wrk -t2 -c32 -d600s -s "$here/post_until.lua" "http://127.0.0.1:$port/api/v1/tasks" | grep -E "requests in|Requests/sec"
+count() { curl -sf "http://127.0.0.1:$port/metrics" | awk '/^fleet_tasks\{state="queued"\}/{print $2}'; }
+start_s=$(date +%s)
+while [ "$(count)" -lt "$stored" ]; do
+  wrk -t2 -c32 -d5s -s "$here/post_task.lua" "http://127.0.0.1:$port/api/v1/tasks" >/dev/null
+done
+echo "stored $(count) tasks in $(( $(date +%s) - start_s )) s"
 echo "db size: $(du -h "$data"/*.redb 2>/dev/null | cut -f1 | tr '\n' ' ')"
 echo "## GET /api/v1/tasks?limit=1 (32 connections) with GET /healthz (4 connections) at the same time"
 wrk -t1 -c4 -d"$duration" --latency "http://127.0.0.1:$port/healthz" >"$data/healthz.txt" &

@@ -18,6 +18,7 @@ pub const LATENCY_BUCKETS_S: [f64; 12] = [
 pub struct FleetMetrics {
     replans_total: AtomicU64,
     replan_failures_total: AtomicU64,
+    replans_reused_total: AtomicU64,
     intentions_total: AtomicU64,
     latency_buckets: [AtomicU64; LATENCY_BUCKETS_S.len()],
     latency_count: AtomicU64,
@@ -34,6 +35,16 @@ impl FleetMetrics {
         if !ok {
             self.replan_failures_total.fetch_add(1, Ordering::Relaxed);
         }
+    }
+
+    /// One replan was answered from the robot's kept plan, without a search.
+    pub fn record_reuse(&self) {
+        self.replans_reused_total.fetch_add(1, Ordering::Relaxed);
+    }
+
+    #[must_use]
+    pub fn replans_reused_total(&self) -> u64 {
+        self.replans_reused_total.load(Ordering::Relaxed)
     }
 
     /// One intention left the service `latency` after the pose it answers arrived.
@@ -131,10 +142,13 @@ impl FleetMetrics {
              fleet_replans_total {}\n\
              # HELP fleet_replan_failures_total Replans that found no path.\n\
              # TYPE fleet_replan_failures_total counter\nfleet_replan_failures_total {}\n\
+             # HELP fleet_replans_reused_total Replans answered from the kept plan, no search.\n\
+             # TYPE fleet_replans_reused_total counter\nfleet_replans_reused_total {}\n\
              # HELP fleet_intentions_total Intentions published.\n\
              # TYPE fleet_intentions_total counter\nfleet_intentions_total {}",
             load(&self.replans_total),
             load(&self.replan_failures_total),
+            load(&self.replans_reused_total),
             load(&self.intentions_total)
         );
         let _ = writeln!(

@@ -166,6 +166,9 @@ fn cycle(fleet: &Fleet, id: &RobotId, arrival: &Arrival, st: &mut Pipeline) {
     match planned {
         Ok((goal_index, planned)) => {
             fleet.metrics.record_replan(true);
+            if planned.reused {
+                fleet.metrics.record_reuse();
+            }
             // The image travels only to a robot whose controller reads it; the dashboard's
             // preview stays here.
             let intention =

@@ -3,11 +3,14 @@
 //! - [`dlm`]: the discretized local move from the signed curvature of the path ahead.
 //! - [`lpe`]: the local path and environment image (224 x 224 RGB, heading-up).
 //! - [`pipeline`]: pose in, intention out: the one pipeline the service and the evaluation run.
+//! - [`reuse`]: when the previous plan answers instead of a new search.
 
 pub mod dlm;
 pub mod lpe;
 pub mod pipeline;
+pub mod reuse;
 
 pub use dlm::{dlm_from_path, DlmParams};
 pub use lpe::{render_lpe, LpeImage, LpeParams};
 pub use pipeline::{stop_intention, thin_path, Answer, IntentionConfig, IntentionPlanner, Planned};
+pub use reuse::{KeptPlan, ReuseParams};

@@ -18,7 +18,9 @@ use crate::goals::{Advance, GoalProgress};
 use crate::hybrid_astar::Planner;
 use crate::intention::dlm::{dlm_from_path, DlmParams};
 use crate::intention::lpe::{render_lpe, LpeImage, LpeParams};
+use crate::intention::reuse::{KeptPlan, ReuseParams};
 use crate::map::PlanningMap;
+use crate::path::{length_of, Path};
 
 /// Everything the pipeline needs besides the map; the service fills it from its `[planner]`,
 /// `[dlm]`, `[lpe]` and `[fleet]` tables.
@@ -34,6 +36,9 @@ pub struct IntentionConfig {
     pub path_spacing_m: f64,
     /// Answered poses kept as the travelled part of the LPE image.
     pub trail_poses: usize,
+    /// When the previous plan answers instead of a new search (off by default).
+    #[serde(default)]
+    pub reuse: ReuseParams,
 }
 
 impl Default for IntentionConfig {
@@ -45,6 +50,7 @@ impl Default for IntentionConfig {
             goal_tolerance_m: 0.35,
             path_spacing_m: 0.2,
             trail_poses: 60,
+            reuse: ReuseParams::default(),
         }
     }
 }
@@ -73,6 +79,8 @@ pub struct Planned {
     pub dlm: Dlm,
     /// Rendered when asked for.
     pub lpe: Option<LpeImage>,
+    /// The rest of the previous plan, no new search (see [`ReuseParams`]).
+    pub reused: bool,
 }
 
 impl Planned {
@@ -135,6 +143,7 @@ pub struct IntentionPlanner {
     free: Planner,
     config: IntentionConfig,
     trail: VecDeque<Pose2D>,
+    kept: Option<KeptPlan>,
 }
 
 impl IntentionPlanner {
@@ -148,6 +157,7 @@ impl IntentionPlanner {
         config.planner.validate()?;
         config.dlm.validate()?;
         config.lpe.validate()?;
+        config.reuse.validate()?;
         if !(config.goal_tolerance_m.is_finite() && config.goal_tolerance_m > 0.0) {
             return Err(PlanError::invalid_config(
                 "goal_tolerance_m",
@@ -173,6 +183,7 @@ impl IntentionPlanner {
             free,
             config,
             trail: VecDeque::new(),
+            kept: None,
         })
     }
 
@@ -198,12 +209,15 @@ impl IntentionPlanner {
         self.fixed.set_map(Arc::clone(&map))?;
         self.free.set_map(map)?;
         self.trail.clear();
+        self.kept = None;
         Ok(())
     }
 
-    /// Forgets the travelled trail (the robot was carried or relocalised elsewhere).
+    /// Forgets the travelled trail and the kept plan (the robot was carried or relocalised
+    /// elsewhere).
     pub fn clear_trail(&mut self) {
         self.trail.clear();
+        self.kept = None;
     }
 
     /// Where `pose` leaves the robot on its goals (no planning).
@@ -248,12 +262,65 @@ impl IntentionPlanner {
         free_heading: bool,
         render_lpe: bool,
     ) -> Result<Planned, PlanError> {
+        let kept_rest = self.kept.as_mut().and_then(|k| {
+            k.follow(
+                self.fixed.map(),
+                robot,
+                goal,
+                free_heading,
+                &self.config.reuse,
+            )
+        });
+        let reused = kept_rest.is_some();
+        let (poses, length_m) = match kept_rest {
+            Some(rest) => {
+                let length_m = length_of(&rest);
+                (rest, length_m)
+            }
+            None => {
+                let path = self.search(robot, goal, free_heading)?;
+                self.kept = self.config.reuse.enabled.then(|| {
+                    KeptPlan::new(
+                        self.fixed.map().key(),
+                        goal,
+                        free_heading,
+                        path.poses.clone(),
+                    )
+                });
+                (path.poses, path.length_m)
+            }
+        };
+        let dlm = dlm_from_path(&poses, robot, &self.config.dlm);
+        let lpe = if render_lpe {
+            let trail: Vec<Pose2D> = self.trail.iter().copied().collect();
+            // The parameters were validated in `new`, the only way rendering can fail.
+            render_lpe_image(self.fixed.map(), robot, &trail, &poses, &self.config.lpe)
+        } else {
+            None
+        };
+        Ok(Planned {
+            goal,
+            path: thin_path(&poses, self.config.path_spacing_m),
+            length_m,
+            dlm,
+            lpe,
+            reused,
+        })
+    }
+
+    /// A new hybrid-A* search from `robot` to `goal`.
+    fn search(
+        &mut self,
+        robot: Pose2D,
+        goal: Pose2D,
+        free_heading: bool,
+    ) -> Result<Path, PlanError> {
         let planner = if free_heading {
             &mut self.free
         } else {
             &mut self.fixed
         };
-        let path = match planner.plan(robot, goal) {
+        match planner.plan(robot, goal) {
             // A pose estimate that grazes a wall (a cut corner, a few cm of AMCL error) is no
             // reason to stop for good: plan from the nearest free pose and lead there first.
             Err(
@@ -266,31 +333,10 @@ impl IntentionPlanner {
                 let mut path = planner.plan(free, goal)?;
                 path.poses.insert(0, robot);
                 path.length_m += robot.distance_m(&free);
-                path
+                Ok(path)
             }
-            other => other?,
-        };
-        let dlm = dlm_from_path(&path.poses, robot, &self.config.dlm);
-        let lpe = if render_lpe {
-            let trail: Vec<Pose2D> = self.trail.iter().copied().collect();
-            // The parameters were validated in `new`, the only way rendering can fail.
-            render_lpe_image(
-                self.fixed.map(),
-                robot,
-                &trail,
-                &path.poses,
-                &self.config.lpe,
-            )
-        } else {
-            None
-        };
-        Ok(Planned {
-            goal,
-            path: thin_path(&path.poses, self.config.path_spacing_m),
-            length_m: path.length_m,
-            dlm,
-            lpe,
-        })
+            other => other,
+        }
     }
 }
 

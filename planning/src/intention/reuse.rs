@@ -1,0 +1,147 @@
+//! Keeping the previous plan while it still holds (issue 16: cheaper replanning).
+//!
+//! The paper replans every cycle. Most cycles the robot is still on the path it was sent, the
+//! map version and the goal are the same, and a new hybrid-A* search returns the same route
+//! from a point a few centimetres further along. [`KeptPlan`] keeps the last searched path and
+//! answers such a cycle with the rest of it instead; it asks for a new search when the map or
+//! the goal changed, when the robot left a corridor around the path (position and heading), at
+//! the path's end, or after `max_cycles` reused answers in a row, so a better route that only
+//! shows from further along is still found within a bounded time.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Endpoint, PlanError};
+use crate::map::{MapKey, PlanningMap};
+use protocol::Pose2D;
+
+/// When a kept plan may answer instead of a new search.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ReuseParams {
+    /// Off: a new search every cycle (the paper's behaviour, and the reference it is measured
+    /// against).
+    pub enabled: bool,
+    /// The robot must be within this distance of the kept path.
+    pub corridor_m: f64,
+    /// ... and its heading within this angle of the path's there.
+    pub corridor_yaw_rad: f64,
+    /// A new search after this many reused answers in a row.
+    pub max_cycles: u32,
+}
+
+impl Default for ReuseParams {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            corridor_m: 0.25,
+            corridor_yaw_rad: 0.5,
+            max_cycles: 20,
+        }
+    }
+}
+
+impl ReuseParams {
+    /// # Errors
+    /// [`PlanError::InvalidConfig`] naming the field and value.
+    pub fn validate(&self) -> Result<(), PlanError> {
+        if !(self.corridor_m.is_finite() && self.corridor_m > 0.0) {
+            return Err(PlanError::invalid_config(
+                "reuse.corridor_m",
+                self.corridor_m,
+                "must be positive",
+            ));
+        }
+        if !(self.corridor_yaw_rad.is_finite()
+            && self.corridor_yaw_rad > 0.0
+            && self.corridor_yaw_rad <= std::f64::consts::PI)
+        {
+            return Err(PlanError::invalid_config(
+                "reuse.corridor_yaw_rad",
+                self.corridor_yaw_rad,
+                "must be in (0, pi]",
+            ));
+        }
+        if self.max_cycles == 0 {
+            return Err(PlanError::invalid_config(
+                "reuse.max_cycles",
+                self.max_cycles,
+                "must be at least 1",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The last searched path of one robot, and how far along it the robot has come.
+#[derive(Debug, Clone)]
+pub struct KeptPlan {
+    map: MapKey,
+    goal: Pose2D,
+    free_heading: bool,
+    poses: Vec<Pose2D>,
+    /// Index of the path pose nearest the robot at the last answer (the search for the nearest
+    /// pose starts here, so a path that passes near itself is never followed backwards).
+    along: usize,
+    reused: u32,
+}
+
+impl KeptPlan {
+    /// Keeps `poses`, just searched on `map` to `goal`.
+    #[must_use]
+    pub fn new(map: MapKey, goal: Pose2D, free_heading: bool, poses: Vec<Pose2D>) -> Self {
+        Self {
+            map,
+            goal,
+            free_heading,
+            poses,
+            along: 0,
+            reused: 0,
+        }
+    }
+
+    /// The rest of the kept path from `robot` (the robot's pose first), or `None` when a new
+    /// search is due (see the module docs).
+    pub fn follow(
+        &mut self,
+        map: &PlanningMap,
+        robot: Pose2D,
+        goal: Pose2D,
+        free_heading: bool,
+        params: &ReuseParams,
+    ) -> Option<Vec<Pose2D>> {
+        // A free-heading goal's heading is resolved from the robot's pose each cycle, so only
+        // its position identifies it.
+        let same_goal = free_heading == self.free_heading
+            && goal.x_m == self.goal.x_m
+            && goal.y_m == self.goal.y_m
+            && (free_heading || goal.yaw_rad == self.goal.yaw_rad);
+        if !params.enabled
+            || map.key() != self.map
+            || !same_goal
+            || self.reused >= params.max_cycles
+        {
+            return None;
+        }
+        let (offset, nearest) = self
+            .poses
+            .get(self.along..)?
+            .iter()
+            .enumerate()
+            .min_by(|(_, a), (_, b)| robot.distance_m(a).total_cmp(&robot.distance_m(b)))?;
+        let index = self.along + offset;
+        let turned = protocol::normalize_angle(robot.yaw_rad - nearest.yaw_rad).abs();
+        if robot.distance_m(nearest) > params.corridor_m
+            || turned > params.corridor_yaw_rad
+            || index + 1 >= self.poses.len()
+            || map.check_endpoint(Endpoint::Start, robot).is_err()
+        {
+            return None;
+        }
+        self.along = index;
+        self.reused += 1;
+        let mut rest = Vec::with_capacity(self.poses.len() - index);
+        rest.push(robot);
+        rest.extend_from_slice(&self.poses[index + 1..]);
+        Some(rest)
+    }
+}
