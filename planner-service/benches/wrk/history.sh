@@ -12,15 +12,9 @@ maps="${FLEET_SHARED_DIR:-$root/../shared}/maps/nav2"
 port="${PORT:-18081}"
 stored="${STORED:-36800}"
 duration="${DURATION:-10s}"
-export FLEET_TOKEN="wrk-bench-token-0123456789"
-data="$(mktemp -d)"
-"$bin" serve --listen "127.0.0.1:$port" --data-dir "$data" --zenoh-listen tcp/127.0.0.1:0 >"$data/serve.log" 2>&1 &
-pid=$!
-trap 'kill -TERM $pid 2>/dev/null; wait $pid 2>/dev/null; rm -rf "$data"' EXIT
-for _ in $(seq 100); do curl -sf "http://127.0.0.1:$port/healthz" >/dev/null && break; sleep 0.1; done
+# shellcheck source=serve.sh
+. "$here/serve.sh"
 auth=(-H "Authorization: Bearer $FLEET_TOKEN")
-curl -sf "${auth[@]}" -F name=depot \
-  -F "yaml=@$maps/depot.yaml" -F "image=@$maps/depot.pgm" "http://127.0.0.1:$port/api/v1/maps" >/dev/null
 echo "## filling the store: $stored tasks through POST /api/v1/tasks"
 count() { curl -sf "http://127.0.0.1:$port/metrics" | awk '/^fleet_tasks\{state="queued"\}/{print $2}'; }
 start_s=$(date +%s)
