@@ -593,6 +593,18 @@ mod tests {
         s
     }
 
+    fn args_of(cmd: &Command) -> Vec<String> {
+        cmd.get_args()
+            .map(|a| a.to_string_lossy().into_owned())
+            .collect()
+    }
+
+    /// The value after `flag` in `args`.
+    fn flag_value(args: &[String], flag: &str) -> String {
+        let i = args.iter().position(|a| a == flag).unwrap();
+        args[i + 1].clone()
+    }
+
     #[test]
     fn controllers_cycle_over_the_robots() {
         let dir = tempfile::tempdir().unwrap();
@@ -670,14 +682,8 @@ mod tests {
             ControllerKind::Lpe,
             Some(Path::new("/m/lpe.onnx")),
         );
-        let args: Vec<String> = cmd
-            .get_args()
-            .map(|a| a.to_string_lossy().into_owned())
-            .collect();
-        let at = |flag: &str| {
-            let i = args.iter().position(|a| a == flag).unwrap();
-            args[i + 1].clone()
-        };
+        let args = args_of(&cmd);
+        let at = |flag: &str| flag_value(&args, flag);
         let parsed: Vec<f64> = at("--initial-pose")
             .split(',')
             .map(|v| v.parse().unwrap())
@@ -702,14 +708,8 @@ mod tests {
             ControllerKind::Lpe,
             None,
         );
-        let args: Vec<String> = cmd
-            .get_args()
-            .map(|a| a.to_string_lossy().into_owned())
-            .collect();
-        let at = |flag: &str| {
-            let i = args.iter().position(|a| a == flag).unwrap();
-            args[i + 1].clone()
-        };
+        let args = args_of(&cmd);
+        let at = |flag: &str| flag_value(&args, flag);
         assert_eq!(at("--zenoh-tls-cert"), "/site/agent.robot_2.pem");
         assert_eq!(at("--zenoh-tls-key"), "/site/agent.robot_2.key");
         assert_eq!(at("--zenoh-tls-ca"), "/site/ca.pem");

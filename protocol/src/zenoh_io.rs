@@ -441,6 +441,17 @@ pub fn peer_config(listen: &[String], connect: &[String]) -> Result<zenoh::Confi
     SessionArgs::new(listen, connect).config()
 }
 
+/// The endpoints `session` listens on, e.g. `tcp/127.0.0.1:40123`.
+pub async fn locators(session: &Session) -> Vec<String> {
+    session
+        .info()
+        .locators()
+        .await
+        .iter()
+        .map(ToString::to_string)
+        .collect()
+}
+
 /// Opens a session listening on `127.0.0.1:0` and a second session connected to it: two
 /// processes' worth of Zenoh on loopback with an OS-chosen port, for tests and local demos.
 ///
@@ -450,13 +461,7 @@ pub async fn loopback_pair() -> Result<(Session, Session), SessionError> {
     let listener = SessionArgs::new(&["tcp/127.0.0.1:0".to_string()], &[])
         .open()
         .await?;
-    let endpoints: Vec<String> = listener
-        .info()
-        .locators()
-        .await
-        .iter()
-        .map(ToString::to_string)
-        .collect();
+    let endpoints = locators(&listener).await;
     if endpoints.is_empty() {
         return Err(SessionError::NoLocator);
     }

@@ -27,13 +27,7 @@ async fn open(files: &SiteFiles, identity: &Identity, connect: &[String]) -> Ses
 }
 
 async fn tls_endpoints(session: &Session) -> Vec<String> {
-    let endpoints: Vec<String> = session
-        .info()
-        .locators()
-        .await
-        .iter()
-        .map(ToString::to_string)
-        .collect();
+    let endpoints = protocol::zenoh_io::locators(session).await;
     assert!(
         endpoints.iter().all(|e| e.starts_with("tls/127.0.0.1:")),
         "listens on loopback TLS only: {endpoints:?}"

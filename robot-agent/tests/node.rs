@@ -107,13 +107,7 @@ impl Harness {
         let hub = zenoh::open(protocol::peer_config(&["tcp/127.0.0.1:0".into()], &[]).unwrap())
             .await
             .unwrap();
-        let endpoints: Vec<String> = hub
-            .info()
-            .locators()
-            .await
-            .iter()
-            .map(ToString::to_string)
-            .collect();
+        let endpoints = protocol::zenoh_io::locators(&hub).await;
         assert!(!endpoints.is_empty());
 
         let mut world = World::from_scenario_file(&scenario(task), SimConfig::default()).unwrap();

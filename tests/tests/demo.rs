@@ -16,6 +16,24 @@ fn agent_pid(demo: &Service, robot_id: &str) -> Option<u32> {
         .copied()
 }
 
+/// Waits for robot_1 to be online with a pose, then gives it a task across the junctions map;
+/// the task's id.
+fn task_once_online(demo: &Service) -> String {
+    demo.wait_for("/api/v1/robots", Duration::from_secs(90), |v| {
+        robot(v, "robot_1")
+            .and_then(|r| (r["online"] == true && r["pose"].is_object()).then_some(()))
+    })
+    .unwrap();
+    let (status, task) = demo
+        .post(
+            "/api/v1/tasks",
+            &json!({"map": "junctions", "robot_id": "robot_1", "goals": [{"x_m": 9.0, "y_m": 4.0}]}),
+        )
+        .unwrap();
+    assert_eq!(status, 201, "{task}");
+    task["id"].as_str().unwrap().to_string()
+}
+
 #[test]
 fn a_killed_agent_is_restarted_and_its_task_resumes_and_completes() {
     let bins = bin_dir().unwrap();
@@ -35,20 +53,7 @@ fn a_killed_agent_is_restarted_and_its_task_resumes_and_completes() {
     )
     .unwrap();
     assert!(demo.zenoh.starts_with("tcp/127.0.0.1:"), "{}", demo.zenoh);
-    demo.wait_for("/api/v1/robots", Duration::from_secs(90), |v| {
-        robot(v, "robot_1")
-            .and_then(|r| (r["online"] == true && r["pose"].is_object()).then_some(()))
-    })
-    .unwrap();
-
-    let (status, task) = demo
-        .post(
-            "/api/v1/tasks",
-            &json!({"map": "junctions", "robot_id": "robot_1", "goals": [{"x_m": 9.0, "y_m": 4.0}]}),
-        )
-        .unwrap();
-    assert_eq!(status, 201, "{task}");
-    let id = task["id"].as_str().unwrap().to_string();
+    let id = task_once_online(&demo);
     let task_path = format!("/api/v1/tasks/{id}");
     let wait_state = |kind: &str, secs: u64| -> Value {
         demo.wait_for(&task_path, Duration::from_secs(secs), |t| {
@@ -132,19 +137,7 @@ fn a_secured_demo_drives_over_mutual_tls_with_access_control() {
     }
     // Poses, status and liveliness (the agent's) reach the planner; intentions (the planner's)
     // reach the agent and commands (the agent's) the simulated base: the task completes.
-    demo.wait_for("/api/v1/robots", Duration::from_secs(90), |v| {
-        robot(v, "robot_1")
-            .and_then(|r| (r["online"] == true && r["pose"].is_object()).then_some(()))
-    })
-    .unwrap();
-    let (status, task) = demo
-        .post(
-            "/api/v1/tasks",
-            &json!({"map": "junctions", "robot_id": "robot_1", "goals": [{"x_m": 9.0, "y_m": 4.0}]}),
-        )
-        .unwrap();
-    assert_eq!(status, 201, "{task}");
-    let id = task["id"].as_str().unwrap().to_string();
+    let id = task_once_online(&demo);
     demo.wait_for(
         &format!("/api/v1/tasks/{id}"),
         Duration::from_secs(180),

@@ -197,13 +197,7 @@ impl Server {
 
     /// The Zenoh endpoints the service listens on, e.g. `tcp/127.0.0.1:40123`.
     pub async fn zenoh_locators(&self) -> Vec<String> {
-        self.session
-            .info()
-            .locators()
-            .await
-            .into_iter()
-            .map(|l| l.to_string())
-            .collect()
+        protocol::zenoh_io::locators(&self.session).await
     }
 
     /// The map store.
