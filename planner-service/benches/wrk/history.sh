@@ -18,8 +18,12 @@ auth=(-H "Authorization: Bearer $FLEET_TOKEN")
 echo "## filling the store: $stored tasks through POST /api/v1/tasks"
 count() { curl -sf "http://127.0.0.1:$port/metrics" | awk '/^fleet_tasks\{state="queued"\}/{print $2}'; }
 start_s=$(date +%s)
+# Each 5 s round prints the create rate beside the queued count it started from, so the rate on
+# an empty store and on a full one come from the same run.
 while [ "$(count)" -lt "$stored" ]; do
-  wrk -t2 -c32 -d5s -s "$here/post_task.lua" "http://127.0.0.1:$port/api/v1/tasks" >/dev/null
+  before=$(count)
+  rate=$(wrk -t2 -c32 -d5s -s "$here/post_task.lua" "http://127.0.0.1:$port/api/v1/tasks" | awk '/Requests\/sec/{print $2}')
+  echo "queued $before: $rate creates/s"
 done
 echo "stored $(count) tasks in $(( $(date +%s) - start_s )) s"
 echo "db size: $(du -h "$data"/*.redb 2>/dev/null | cut -f1 | tr '\n' ' ')"

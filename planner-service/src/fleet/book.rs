@@ -10,7 +10,8 @@
 //! it as [`Effect`]s. Nothing here publishes, sleeps or reads a clock, so the lifecycle is
 //! tested with a real database and no Zenoh.
 
-use std::collections::HashMap;
+use std::collections::{BTreeSet, HashMap};
+use std::ops::Bound;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -83,6 +84,9 @@ pub struct TaskBook {
     /// Every unfinished task as stored: the replanning loop reads it here, not from the
     /// database, so "no change" (the common case) costs no transaction.
     live: HashMap<TaskId, Task>,
+    /// The queued tasks of `live` per map, oldest first: dispatch walks only these, so its
+    /// cost does not grow with a backlog on a map that has no free robot.
+    queued: HashMap<MapName, BTreeSet<(u64, TaskId)>>,
     assignments: HashMap<RobotId, Assignment>,
     /// A goal within this distance of the pose is reached.
     goal_tolerance_m: f64,
@@ -102,6 +106,7 @@ impl TaskBook {
         let mut book = Self {
             store,
             live: HashMap::new(),
+            queued: HashMap::new(),
             assignments: HashMap::new(),
             goal_tolerance_m: config.goal_tolerance_m,
             pause_timeout: Duration::from_millis(config.pause_timeout_ms),
@@ -116,7 +121,7 @@ impl TaskBook {
                 tracing::info!(task = %task.id, robot = %robot, state = %task.kind(), "resuming stored task");
                 book.assignments.insert(robot.clone(), a);
             }
-            book.live.insert(task.id.clone(), task);
+            book.cache(task);
         }
         Ok(book)
     }
@@ -177,7 +182,7 @@ impl TaskBook {
             now.wall_ns,
         )?;
         tracing::info!(task = %task.id, map = %task.map, goals = task.goals.len(), state = %task.kind(), "task created");
-        self.live.insert(task.id.clone(), task.clone());
+        self.cache(task.clone());
         if let Some(r) = req.robot_id {
             self.assignments.insert(r, Assignment::new(task.id.clone()));
         }
@@ -256,40 +261,56 @@ impl TaskBook {
 
     /// Gives queued tasks, oldest first, to the nearest free robot on their map: online,
     /// localized, without a task (ties go to the smaller id).
+    ///
+    /// Costs O(maps × robots) plus O(log n) per task assigned, whatever the backlog: a map's
+    /// queue is walked only while a robot on it is free.
     pub fn dispatch(&mut self, robots: &RobotRegistry, now: Now) -> Vec<Effect> {
-        let mut queued: Vec<(u64, TaskId)> = self
-            .live
-            .values()
-            .filter(|t| t.state == TaskState::Queued)
-            .map(|t| (t.created_ns, t.id.clone()))
-            .collect();
-        queued.sort();
         let mut effects = Vec::new();
-        for (_, id) in queued {
-            let Some(task) = self.live.get(&id) else {
-                continue;
-            };
-            let Some(first) = task.goals.first() else {
-                continue;
-            };
-            let chosen = robots
-                .iter()
-                .filter(|r| !self.assignments.contains_key(&r.id))
-                .filter_map(|r| Some((r.distance_on(&task.map, first)?, &r.id)))
-                .min_by(|a, b| a.0.total_cmp(&b.0).then_with(|| a.1.cmp(b.1)))
-                .map(|(_, r)| r.clone());
-            let Some(robot) = chosen else {
-                continue;
-            };
-            let state = TaskState::Assigned {
-                robot_id: robot.clone(),
-            };
-            match self.change(&id, state, Some(&robot), now, &mut effects) {
-                Ok(_) => {
-                    tracing::info!(task = %id, robot = %robot, "task assigned");
-                    self.assignments.insert(robot, Assignment::new(id));
+        if robots.iter().all(|r| self.assignments.contains_key(&r.id)) {
+            return effects;
+        }
+        let mut maps: Vec<MapName> = self.queued.keys().cloned().collect();
+        maps.sort();
+        for map in maps {
+            let mut after: Option<(u64, TaskId)> = None;
+            loop {
+                let next = self.queued.get(&map).and_then(|q| {
+                    let lower = after.as_ref().map_or(Bound::Unbounded, Bound::Excluded);
+                    q.range((lower, Bound::Unbounded)).next().cloned()
+                });
+                let Some(key) = next else {
+                    break;
+                };
+                let id = key.1.clone();
+                after = Some(key);
+                let Some(first) = self.live.get(&id).and_then(|t| t.goals.first()) else {
+                    continue;
+                };
+                let mut free = robots
+                    .iter()
+                    .filter(|r| !self.assignments.contains_key(&r.id))
+                    .filter_map(|r| Some((r.distance_on(&map, first)?, &r.id)))
+                    .peekable();
+                if free.peek().is_none() {
+                    // No robot on this map is free: the rest of its queue waits too.
+                    break;
                 }
-                Err(e) => tracing::error!(task = %id, "cannot assign: {e}"),
+                let Some(robot) = free
+                    .min_by(|a, b| a.0.total_cmp(&b.0).then_with(|| a.1.cmp(b.1)))
+                    .map(|(_, r)| r.clone())
+                else {
+                    break;
+                };
+                let state = TaskState::Assigned {
+                    robot_id: robot.clone(),
+                };
+                match self.change(&id, state, Some(&robot), now, &mut effects) {
+                    Ok(_) => {
+                        tracing::info!(task = %id, robot = %robot, "task assigned");
+                        self.assignments.insert(robot, Assignment::new(id));
+                    }
+                    Err(e) => tracing::error!(task = %id, "cannot assign: {e}"),
+                }
             }
         }
         effects
@@ -517,16 +538,42 @@ impl TaskBook {
             StoreError::NotFound(_) => not_found(id),
             other => FleetError::Store(other),
         })?;
-        if next.state.is_terminal() {
-            self.live.remove(id);
-        } else {
-            self.live.insert(id.clone(), next.clone());
+        self.uncache(id);
+        if !next.state.is_terminal() {
+            self.cache(next.clone());
         }
         effects.push(Effect::Announce {
             task: next,
             before: Some(before),
         });
         Ok(true)
+    }
+
+    /// Keeps an unfinished task in `live` (and in its map's queue while it is queued).
+    fn cache(&mut self, task: Task) {
+        self.uncache(&task.id);
+        if task.state == TaskState::Queued {
+            self.queued
+                .entry(task.map.clone())
+                .or_default()
+                .insert((task.created_ns, task.id.clone()));
+        }
+        self.live.insert(task.id.clone(), task);
+    }
+
+    /// Forgets a task that ended (or is about to be cached again).
+    fn uncache(&mut self, id: &TaskId) {
+        let Some(old) = self.live.remove(id) else {
+            return;
+        };
+        if old.state == TaskState::Queued {
+            if let Some(q) = self.queued.get_mut(&old.map) {
+                q.remove(&(old.created_ns, old.id));
+                if q.is_empty() {
+                    self.queued.remove(&old.map);
+                }
+            }
+        }
     }
 }
 

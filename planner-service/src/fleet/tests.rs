@@ -256,6 +256,53 @@ fn dispatch_picks_the_nearest_free_localized_online_robot_on_the_map_ties_by_id(
 }
 
 #[test]
+fn the_queue_per_map_goes_oldest_first_and_forgets_cancelled_and_assigned_tasks() {
+    let dir = tempfile::tempdir().unwrap();
+    let t0 = Now::read();
+    let (mut core, _store, _) = open(dir.path(), t0);
+    let on_depot = |goal: (f64, f64)| NewTask {
+        map: MapName::new("depot").unwrap(),
+        ..new_task(None, &[goal])
+    };
+    // A backlog on a map no robot is on, and three tasks waiting on `junctions`.
+    for i in 0..50 {
+        core.create(on_depot((1.0 + f64::from(i) * 0.1, 1.0)), 1, ms(t0, 0))
+            .unwrap();
+    }
+    let mut waiting = Vec::new();
+    for i in 0..3 {
+        let (task, _) = core
+            .create(new_task(None, &[(8.0, 4.0)]), 1, ms(t0, 1 + i))
+            .unwrap();
+        assert_eq!(task.state, TaskState::Queued);
+        waiting.push(task.id);
+    }
+    core.cancel(&waiting[0], ms(t0, 10)).unwrap();
+
+    // The first free robot on `junctions` takes the oldest task still queued there, the
+    // second the next; the depot backlog stays as it is.
+    let (_, effects) = core.pose_arrived(&robot("robot_a"), pose(3.0, 4.0), ms(t0, 20), false);
+    assert_eq!(
+        announced(&effects),
+        [(TaskStateKind::Assigned, Some(TaskStateKind::Queued))]
+    );
+    assert_eq!(core.book.task_of(&robot("robot_a")), Some(&waiting[1]));
+    core.pose_arrived(&robot("robot_b"), pose(3.0, 6.0), ms(t0, 30), false);
+    assert_eq!(core.book.task_of(&robot("robot_b")), Some(&waiting[2]));
+    let (_, effects) = core.pose_arrived(&robot("robot_c"), pose(3.0, 6.0), ms(t0, 40), false);
+    assert!(announced(&effects).is_empty(), "{effects:?}");
+    // A robot on the depot takes the depot's oldest.
+    core.pose_arrived(
+        &robot("robot_d"),
+        pose_on("depot", 0.0, 0.0),
+        ms(t0, 50),
+        false,
+    );
+    let first_depot = core.book.task_of(&robot("robot_d")).cloned().unwrap();
+    assert_eq!(first_depot.as_str(), "t-000001");
+}
+
+#[test]
 fn a_silent_robot_pauses_its_task_resumes_when_it_reports_and_fails_after_the_pause_timeout() {
     let dir = tempfile::tempdir().unwrap();
     let t0 = Now::read();
