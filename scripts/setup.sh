@@ -28,6 +28,14 @@ installed="$(.venv/bin/python -c 'import importlib.metadata as m; print(m.versio
 if [ "$installed" != "$SCHEMATHESIS_VERSION" ]; then
   .venv/bin/python -m pip install --quiet --disable-pip-version-check "schemathesis==${SCHEMATHESIS_VERSION}"
 fi
+# Nav2's particle filter (PyPI `amcl`, GPL, used only by the comparison script) and an MCAP
+# reader, for scripts/amcl_compare.py (our AMCL beside Nav2's on the same run logs).
+AMCL_VERSION="0.1.2"
+MCAP_VERSION="1.6.0"
+installed="$(.venv/bin/python -c 'import importlib.metadata as m; print(m.version("amcl"), m.version("mcap"))' 2>/dev/null || true)"
+if [ "$installed" != "$AMCL_VERSION $MCAP_VERSION" ]; then
+  .venv/bin/python -m pip install --quiet --disable-pip-version-check "amcl==${AMCL_VERSION}" "mcap==${MCAP_VERSION}" zstandard
+fi
 if ! compgen -G ".venv/lib/python3*/site-packages/onnxruntime/capi/libonnxruntime.so*" >/dev/null; then
   echo "error: onnxruntime ${ORT_VERSION} installed, but no libonnxruntime.so* under .venv/lib/python3*/site-packages/onnxruntime/capi/" >&2
   exit 1

@@ -9,10 +9,14 @@
 //! an intervention AMCL is re-initialised at the new true pose with the configured initial
 //! covariance, as the operator who carried the robot would set its pose estimate; the settling
 //! after it counts too.
+//!
+//! [`from_log`] makes the same row from a run log (`--record-dir`, `robot-agent --record`)
+//! instead of driving: the agent's AMCL replayed over the log's sensors
+//! ([`robot_agent::replay`]), against the log's ground truth.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use robot_agent::ControllerKind;
+use robot_agent::{AgentConfig, ControllerKind};
 use serde::Serialize;
 
 use crate::table::{self, Prepared, RunResult, TableError, TableOptions};
@@ -108,6 +112,123 @@ pub fn run_task(
         progress,
     )?;
     Ok(TaskAccuracy::from(&result))
+}
+
+/// One task's figures from a run log: the agent's AMCL replayed over it with `config` (`None`:
+/// the configuration the log recorded) on `map` (`None`: the floor plan file the log names).
+///
+/// Goals, collisions and the run's time come from the log's `/run_summary` (an `eval` log);
+/// a log without one (a live agent's) shows 0 goals, and its re-initialisations as
+/// interventions.
+///
+/// # Errors
+/// [`TableError::Log`] for a file that is not a readable run log, [`TableError::Setup`] when
+/// the map cannot be found or loaded or the replay fails, naming the file.
+pub fn from_log(
+    log_path: &Path,
+    map: Option<&Path>,
+    config: Option<&AgentConfig>,
+) -> Result<TaskAccuracy, TableError> {
+    let log = fleet_log::RunLog::open(log_path)?;
+    let setup = |reason: String| TableError::Setup {
+        what: "replay",
+        reason: format!("{}: {reason}", log_path.display()),
+    };
+    let map_path: PathBuf = match map {
+        Some(m) => m.to_path_buf(),
+        None => log
+            .map()
+            .and_then(|m| m.path.clone())
+            .map(PathBuf::from)
+            .ok_or_else(|| setup("the log names no floor plan file; give --map".into()))?,
+    };
+    let grid = map_core::load_ros_map(&map_path, &map_core::ImportLimits::default())
+        .map_err(|e| setup(format!("map {}: {e}", map_path.display())))?
+        .grid;
+    let config = match config {
+        Some(c) => c.clone(),
+        None => robot_agent::replay::recorded_config(&log).map_err(|e| setup(e.to_string()))?,
+    };
+    let replay =
+        robot_agent::replay::replay(&log, &grid, &config).map_err(|e| setup(e.to_string()))?;
+    if replay.summary.map_matches == Some(false) {
+        tracing::warn!(log = %log_path.display(), map = %map_path.display(), "not the map the log was recorded on");
+    }
+    let s = &replay.summary;
+    let position = s.position_error_m.ok_or_else(|| {
+        setup("no ground truth in the log (record it with eval or sim run --record)".into())
+    })?;
+    let heading = s.heading_error_deg.unwrap_or_default();
+    let run = log.run_summary();
+    let diverged = position.max > DIVERGED_POSITION_ERROR_M;
+    Ok(TaskAccuracy {
+        task: run.map_or_else(
+            || {
+                log_path
+                    .file_stem()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default()
+            },
+            |r| r.scenario.clone(),
+        ),
+        sim_time_s: run.map_or(s.log_duration_s, |r| r.time_s),
+        mean_position_error_m: position.mean,
+        max_position_error_m: position.max,
+        mean_heading_error_deg: heading.mean,
+        max_heading_error_deg: heading.max,
+        diverged,
+        goals_reached: run.map_or(0, |r| r.goals_reached),
+        goals_total: run.map_or(0, |r| r.goals_total),
+        distance_m: s.distance_m,
+        collisions: run.map_or(0, |r| r.collisions),
+        interventions: run.map_or_else(
+            || u32::try_from(s.reinitialisations).unwrap_or(u32::MAX),
+            |r| r.interventions,
+        ),
+        pass: !diverged
+            && position.mean <= MAX_MEAN_POSITION_ERROR_M
+            && heading.mean <= MAX_MEAN_HEADING_ERROR_DEG,
+    })
+}
+
+/// The run logs named: files as given, folders as their `*.mcap` files in name order.
+///
+/// # Errors
+/// [`TableError::Invalid`] for a path that does not exist or a folder without logs.
+pub fn log_files(paths: &[PathBuf]) -> Result<Vec<PathBuf>, TableError> {
+    let mut files = Vec::new();
+    for p in paths {
+        if p.is_dir() {
+            let mut found: Vec<PathBuf> = std::fs::read_dir(p)
+                .map_err(|e| TableError::Invalid {
+                    field: "log",
+                    value: p.display().to_string(),
+                    reason: e.to_string(),
+                })?
+                .filter_map(Result::ok)
+                .map(|e| e.path())
+                .filter(|f| f.extension().is_some_and(|x| x == "mcap"))
+                .collect();
+            found.sort();
+            if found.is_empty() {
+                return Err(TableError::Invalid {
+                    field: "log",
+                    value: p.display().to_string(),
+                    reason: "the folder has no .mcap file".into(),
+                });
+            }
+            files.extend(found);
+        } else if p.exists() {
+            files.push(p.clone());
+        } else {
+            return Err(TableError::Invalid {
+                field: "log",
+                value: p.display().to_string(),
+                reason: "no such file or folder".into(),
+            });
+        }
+    }
+    Ok(files)
 }
 
 /// A markdown table of the results, one row per task.

@@ -1,12 +1,13 @@
 //! The `eval` command line.
 //!
-//! `eval amcl-accuracy [--tasks a,b,c,d,e] [--seed N] [--out results.json]`: AMCL against the
-//! simulator's ground truth on tasks A–E (see [`crate::amcl_accuracy`]); prints a markdown
-//! table and writes the figures as JSON.
+//! `eval amcl-accuracy [--tasks a,b,c,d,e] [--seed N] [--out results.json] [--record-dir DIR]`:
+//! AMCL against the simulator's ground truth on tasks A–E (see [`crate::amcl_accuracy`]);
+//! prints a markdown table and writes the figures as JSON. `--record-dir` writes one run log
+//! per task (docs/logs.md); `--log FILE|DIR` (repeatable) replays logs instead of driving.
 //!
 //! `eval table [--tasks a,b,c,d,e] [--scenario FILE]... [--behaviour] [--methods LIST]
-//! [--seeds N] [--models DIR] [--jobs N] --out DIR`: the paper's Table 1 and Figure 5 in
-//! closed loop (see [`crate::table`]).
+//! [--seeds N] [--models DIR] [--jobs N] [--record-dir DIR] --out DIR`: the paper's Table 1 and
+//! Figure 5 in closed loop (see [`crate::table`]).
 //!
 //! `eval record [--scenario FILE]... [--samples N] [--noise P] [--noise-peak-radps W] [--policy MODEL --beta B]
 //! [--seed S] [--jobs N] [--image-px PX] [--every K] [--episode-s S] --out DIR`: the expert's demonstrations on the
@@ -59,7 +60,34 @@ pub enum Cmd {
         /// Stop each task after this much simulated time (default: the scenario's limit).
         #[arg(long)]
         max_sim_s: Option<f64>,
+        /// Record each run as a run log `<task>-<controller>-seed<N>.mcap` in this folder.
+        #[arg(long)]
+        record_dir: Option<PathBuf>,
+        /// Also record the camera (JPEG) in the run logs.
+        #[arg(long, requires = "record_dir")]
+        record_camera: bool,
+        /// Replay these run logs (files, or folders of *.mcap; repeatable) instead of driving:
+        /// the agent's AMCL (with --config's tables, else the recorded configuration) against
+        /// the logs' ground truth.
+        #[arg(long, conflicts_with_all = ["record_dir", "max_sim_s", "scenarios"])]
+        log: Vec<PathBuf>,
+        /// With --log: the floor plan (ROS map YAML) instead of the file the log names.
+        #[arg(long, requires = "log")]
+        map: Option<PathBuf>,
     },
+}
+
+fn record_settings(
+    dir: Option<&std::path::Path>,
+    camera: bool,
+) -> Option<table::log::RecordSettings> {
+    dir.map(|dir| table::log::RecordSettings {
+        dir: dir.to_path_buf(),
+        log: fleet_log::LogOptions {
+            camera,
+            ..fleet_log::LogOptions::default()
+        },
+    })
 }
 
 /// The methods `eval table` runs when `--methods` is not given: the ones without a model, and
@@ -127,6 +155,13 @@ pub struct TableArgs {
     /// A run with more interventions than this fails.
     #[arg(long, default_value_t = 30)]
     max_interventions: u32,
+    /// Record each run as a run log `<scenario>-<method>-seed<N>.mcap` in this folder
+    /// (docs/logs.md).
+    #[arg(long)]
+    record_dir: Option<PathBuf>,
+    /// Also record the camera (JPEG) in the run logs.
+    #[arg(long, requires = "record_dir")]
+    record_camera: bool,
 }
 
 /// Arguments of `eval record`.
@@ -340,6 +375,7 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
         max_interventions: args.max_interventions,
         agent,
         models_dir,
+        record: record_settings(args.record_dir.as_deref(), args.record_camera),
         ..TableOptions::default()
     };
     options.validate(&methods)?;
@@ -448,7 +484,32 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
             config,
             scenarios,
             max_sim_s,
+            record_dir,
+            record_camera,
+            log,
+            map,
         } => {
+            if !log.is_empty() {
+                let agent = config
+                    .as_deref()
+                    .map(|c| read_agent_config(Some(c)))
+                    .transpose()?;
+                let mut results = Vec::new();
+                for file in amcl_accuracy::log_files(log)? {
+                    results.push(amcl_accuracy::from_log(
+                        &file,
+                        map.as_deref(),
+                        agent.as_ref(),
+                    )?);
+                }
+                println!("{}", amcl_accuracy::markdown(&results));
+                if let Some(out) = out {
+                    let json = serde_json::to_string_pretty(&results)?;
+                    std::fs::write(out, json)
+                        .with_context(|| format!("cannot write {}", out.display()))?;
+                }
+                return Ok(());
+            }
             let agent = read_agent_config(config.as_deref())?;
             let scenarios = protocol::data_dirs::find_scenarios_dir(scenarios.as_deref())?;
             let paths = tasks
@@ -461,6 +522,7 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
                 run: TableOptions {
                     time_limit_s: *max_sim_s,
                     agent,
+                    record: record_settings(record_dir.as_deref(), *record_camera),
                     ..TableOptions::default()
                 },
             };
@@ -491,5 +553,78 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
             }
             Ok(())
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn record_and_log_flags() {
+        let cli = Cli::try_parse_from([
+            "eval",
+            "amcl-accuracy",
+            "--tasks",
+            "a",
+            "--seed",
+            "1",
+            "--record-dir",
+            "logs",
+            "--record-camera",
+        ])
+        .unwrap();
+        let Cmd::AmclAccuracy {
+            record_dir,
+            record_camera,
+            log,
+            ..
+        } = &cli.command
+        else {
+            panic!("{cli:?}")
+        };
+        assert_eq!(record_dir.as_deref(), Some(std::path::Path::new("logs")));
+        assert!(*record_camera && log.is_empty());
+        let settings = record_settings(record_dir.as_deref(), *record_camera).unwrap();
+        assert!(settings.log.camera);
+
+        let cli = Cli::try_parse_from([
+            "eval",
+            "amcl-accuracy",
+            "--log",
+            "a.mcap",
+            "--log",
+            "logs/",
+            "--map",
+            "m.yaml",
+        ])
+        .unwrap();
+        let Cmd::AmclAccuracy { log, map, .. } = &cli.command else {
+            panic!("{cli:?}")
+        };
+        assert_eq!(log.len(), 2);
+        assert!(map.is_some());
+        // Replaying and recording at once, or a camera without a recording, make no sense.
+        for bad in [
+            &[
+                "eval",
+                "amcl-accuracy",
+                "--log",
+                "a.mcap",
+                "--record-dir",
+                "d",
+            ][..],
+            &["eval", "amcl-accuracy", "--record-camera"][..],
+            &["eval", "amcl-accuracy", "--map", "m.yaml"][..],
+            &["eval", "table", "--out", "o", "--record-camera"][..],
+        ] {
+            assert!(Cli::try_parse_from(bad).is_err(), "{bad:?}");
+        }
+        let cli =
+            Cli::try_parse_from(["eval", "table", "--out", "o", "--record-dir", "d"]).unwrap();
+        let Cmd::Table(args) = &cli.command else {
+            panic!("{cli:?}")
+        };
+        assert_eq!(args.record_dir.as_deref(), Some(std::path::Path::new("d")));
     }
 }

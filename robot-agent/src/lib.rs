@@ -5,12 +5,14 @@
 //! - [`config`]: the agent's configuration.
 //! - [`node`]: the agent node on Zenoh (localization, control and safety loop); [`cli`]: the
 //!   `robot-agent` command line around it.
+//! - [`replay`]: the agent's localization replayed over a recorded run log (`fleet-log`).
 
 pub mod amcl;
 pub mod cli;
 pub mod config;
 pub mod controllers;
 pub mod node;
+pub mod replay;
 
 pub use amcl::{Amcl, AmclConfig, Estimate, LikelihoodField, UpdateOutcome};
 pub use config::{AgentConfig, ControllerKind, Limits, Localization, Safety};

@@ -11,16 +11,21 @@
 //! - applies the safety rules: no intention, a stale one, lost localization or a controller
 //!   error decelerate the robot to a stop with the reason in its [`AgentStatus`]; driving
 //!   resumes by itself when the cause goes away;
-//! - publishes [`AgentStatus`] at `status_rate_hz` and on every state change.
+//! - publishes [`AgentStatus`] at `status_rate_hz` and on every state change;
+//! - with [`NodeOptions::record`], records what it receives (odometry, scans, intentions, the
+//!   camera when asked) and publishes (poses, commands) as a run log (`fleet-log`, MCAP) on a
+//!   background thread, in the order it processed them.
 //!
 //! The decision part ([`Supervisor`]) is plain data in, command out, so it is tested without
 //! Zenoh; [`run`] is the I/O shell around it.
 
 use std::collections::VecDeque;
 use std::future::Future;
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
+use fleet_log::{LogMessage, Recorder};
 use map_core::OccupancyGrid;
 use protocol::keys::{self, RobotTopic};
 use protocol::{
@@ -30,7 +35,7 @@ use protocol::{
 use zenoh::handlers::RingChannel;
 use zenoh::Session;
 
-use crate::amcl::{Amcl, AmclError, LikelihoodField};
+use crate::amcl::{Amcl, AmclError, LikelihoodField, UpdateOutcome};
 use crate::config::{AgentConfig, ConfigError, ControllerKind, Limits};
 use crate::controllers::{
     Control, ControlInput, Controller, DynamicWindow, IntentionNet, IntentionNetError,
@@ -55,6 +60,8 @@ pub enum NodeError {
     Map { name: String, reason: String },
     #[error("localization: {0}")]
     Amcl(#[from] AmclError),
+    #[error("run log: {0}")]
+    Log(#[from] fleet_log::LogError),
 }
 
 fn zenoh_err(action: &'static str) -> impl FnOnce(zenoh::Error) -> NodeError {
@@ -121,6 +128,23 @@ pub struct NodeOptions {
     /// The merged configuration (file + command line); `map` must be set.
     pub config: AgentConfig,
     pub zenoh: zenoh::Config,
+    /// Record a run log (`--record FILE`).
+    pub record: Option<RecordOptions>,
+}
+
+/// Where `--record` writes the run log and what it keeps.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordOptions {
+    /// The MCAP file (written as `FILE.partial` until the agent stops).
+    pub path: PathBuf,
+    pub log: fleet_log::LogOptions,
+}
+
+/// Queues a message for the run log, if one is recorded (the message is built only then).
+fn record(recorder: &mut Option<Recorder>, message: impl FnOnce() -> LogMessage) {
+    if let Some(r) = recorder {
+        r.record(message());
+    }
 }
 
 /// Nanosecond stamps that never go backwards: the wall clock at start plus monotonic time.
@@ -168,6 +192,8 @@ pub struct Supervisor {
     config: AgentConfig,
     map: MapRef,
     amcl: Amcl,
+    /// What AMCL did with the last scan (diagnostics, replay timing).
+    last_amcl: Option<UpdateOutcome>,
     controller: Box<dyn Controller>,
     odometry: VecDeque<Odometry>,
     scan: Option<LaserScan>,
@@ -223,6 +249,7 @@ impl Supervisor {
             config,
             map,
             amcl,
+            last_amcl: None,
             controller,
             odometry: VecDeque::with_capacity(ODOM_HISTORY),
             scan: None,
@@ -236,6 +263,12 @@ impl Supervisor {
             state: AgentState::Starting,
             stop_reason: None,
         })
+    }
+
+    /// What AMCL did with the last scan given to [`Self::on_scan`] (`None` before one).
+    #[must_use]
+    pub fn last_amcl_update(&self) -> Option<UpdateOutcome> {
+        self.last_amcl
     }
 
     #[must_use]
@@ -329,7 +362,7 @@ impl Supervisor {
             self.scan = Some(scan);
             return Ok(None);
         };
-        self.amcl.update(&odom, Some(&scan))?;
+        self.last_amcl = Some(self.amcl.update(&odom, Some(&scan))?);
         let sensor_stamp_ns = scan.header.stamp_ns;
         self.scan = Some(scan);
         let (Some(estimate), Some(pose)) = (self.amcl.estimate(), self.amcl.predict_pose(&odom))
@@ -554,6 +587,7 @@ pub async fn run(
         robot_id,
         config,
         zenoh,
+        record,
     } = options;
     config.validate()?;
     let map_name = config.map.clone().ok_or(ConfigError::Invalid {
@@ -563,12 +597,33 @@ pub async fn run(
     })?;
     // Before the session: a missing ONNX Runtime or a wrong model is a start-up error.
     let controller = make_controller(&config)?;
+    // Before the session too: a log that cannot be created is a start-up error.
+    let mut recorder = record
+        .map(|r| Recorder::start(&r.path, r.log))
+        .transpose()?;
     let session = zenoh::open(zenoh)
         .await
         .map_err(zenoh_err("open the session"))?;
-    let result = run_in_session(&session, &robot_id, &map_name, config, controller, shutdown).await;
+    let result = run_in_session(
+        &session,
+        &robot_id,
+        &map_name,
+        config,
+        controller,
+        &mut recorder,
+        shutdown,
+    )
+    .await;
     if let Err(e) = session.close().await {
         tracing::warn!("closing the zenoh session: {e}");
+    }
+    if let Some(r) = recorder {
+        match r.finish() {
+            Ok(path) => tracing::info!(path = %path.display(), "run log written"),
+            // The run's own error is the one to report.
+            Err(e) if result.is_err() => tracing::warn!("{e}"),
+            Err(e) => return Err(e.into()),
+        }
     }
     result
 }
@@ -579,6 +634,7 @@ async fn run_in_session(
     map_name: &protocol::MapName,
     config: AgentConfig,
     controller: Box<dyn Controller>,
+    recorder: &mut Option<Recorder>,
     shutdown: impl Future<Output = ()>,
 ) -> Result<(), NodeError> {
     let site = config.site.clone();
@@ -663,8 +719,33 @@ async fn run_in_session(
         }
         backoff = (backoff * 2).min(Duration::from_secs(5));
     };
+    let content_hash = map.meta.content_hash.clone();
     let (map_ref, grid) = grid_of(map)?;
     tracing::info!(map = %map_ref.name, version = map_ref.version, "map received");
+    record(recorder, || {
+        LogMessage::Map(fleet_log::MapInfo {
+            stamp_ns: clock.stamp_ns(Instant::now()),
+            name: map_ref.name.to_string(),
+            version: map_ref.version,
+            path: None,
+            content_hash: Some(content_hash),
+            initial_pose: config.localization.initial_pose,
+            initial_covariance: config
+                .localization
+                .initial_pose
+                .map(|_| config.localization.initial_covariance()),
+            source: "robot-agent".into(),
+        })
+    });
+    if let Some(r) = recorder.as_mut() {
+        match serde_json::to_value(&config) {
+            Ok(value) => r.record(LogMessage::AgentConfig {
+                stamp_ns: clock.stamp_ns(Instant::now()),
+                config: value,
+            }),
+            Err(e) => tracing::warn!("the configuration is not recorded: {e}"),
+        }
+    }
     let mut agent = Supervisor::new(config.clone(), map_ref, &grid, controller)?;
     drop(grid);
 
@@ -683,7 +764,10 @@ async fn run_in_session(
             sample = odom_sub.recv_async() => {
                 let sample = sample.map_err(zenoh_err("receive odom"))?;
                 match protocol::decode_sample::<Odometry>(&sample) {
-                    Ok(odom) => agent.on_odometry(odom),
+                    Ok(odom) => {
+                        record(recorder, || LogMessage::Odom(odom.clone()));
+                        agent.on_odometry(odom);
+                    }
                     Err(e) => tracing::warn!("ignoring odom: {e}"),
                 }
             }
@@ -696,9 +780,13 @@ async fn run_in_session(
                         continue;
                     }
                 };
+                record(recorder, || LogMessage::Scan(scan.clone()));
                 let now = Instant::now();
                 match agent.on_scan(scan, now, clock.stamp_ns(now)) {
-                    Ok(Some(pose)) => protocol::zenoh_io::publish(&pose_pub, &pose).await?,
+                    Ok(Some(pose)) => {
+                        protocol::zenoh_io::publish(&pose_pub, &pose).await?;
+                        record(recorder, || LogMessage::AmclPose(pose));
+                    }
                     Ok(None) => tracing::debug!("scan before any odometry: no pose yet"),
                     Err(e) => tracing::warn!("scan not used for localization: {e}"),
                 }
@@ -706,7 +794,12 @@ async fn run_in_session(
             sample = camera_sub.recv_async() => {
                 let sample = sample.map_err(zenoh_err("receive camera"))?;
                 match protocol::decode_sample::<CameraFrame>(&sample) {
-                    Ok(frame) => agent.on_camera(frame),
+                    Ok(frame) => {
+                        if let Some(r) = recorder.as_mut() {
+                            r.record_camera(&frame);
+                        }
+                        agent.on_camera(frame);
+                    }
                     Err(e) => tracing::warn!("ignoring camera frame: {e}"),
                 }
             }
@@ -714,6 +807,9 @@ async fn run_in_session(
                 let sample = sample.map_err(zenoh_err("receive intention"))?;
                 match protocol::decode_sample::<Intention>(&sample) {
                     Ok(intention) => {
+                        record(recorder, || {
+                            LogMessage::Intention(fleet_log::intention_without_pixels(&intention))
+                        });
                         if let Err(why) = agent.on_intention(intention) {
                             tracing::debug!("intention ignored: {why}");
                         }
@@ -731,6 +827,7 @@ async fn run_in_session(
                     omega_radps: decision.cmd_omega_radps,
                 };
                 protocol::zenoh_io::publish(&cmd_pub, &cmd).await?;
+                record(recorder, || LogMessage::CmdVel(cmd));
                 if !same_condition(
                     (published.0, published.1.as_ref()),
                     (decision.state, decision.stop_reason.as_ref()),
@@ -760,6 +857,7 @@ async fn run_in_session(
         omega_radps: 0.0,
     };
     protocol::zenoh_io::publish(&cmd_pub, &stop).await?;
+    record(recorder, || LogMessage::CmdVel(stop));
     let mut last = agent.status(status_seq + 1, clock.stamp_ns(now));
     last.state = AgentState::Stopped;
     last.stop_reason = Some(StopReason::Commanded);

@@ -9,6 +9,7 @@
 // Test helpers panic on broken setup: that is the failure report.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -282,10 +283,23 @@ impl Harness {
         tokio::sync::oneshot::Sender<()>,
         tokio::task::JoinHandle<Result<(), robot_agent::NodeError>>,
     ) {
+        self.spawn_agent_recording(config, None)
+    }
+
+    /// [`Self::spawn_agent`] with `--record`.
+    fn spawn_agent_recording(
+        &self,
+        config: AgentConfig,
+        record: Option<node::RecordOptions>,
+    ) -> (
+        tokio::sync::oneshot::Sender<()>,
+        tokio::task::JoinHandle<Result<(), robot_agent::NodeError>>,
+    ) {
         let options = NodeOptions {
             robot_id: self.robot.clone(),
             config,
             zenoh: node::zenoh_config(&[], &self.endpoints, false).unwrap(),
+            record,
         };
         let (tx, rx) = tokio::sync::oneshot::channel::<()>();
         let task = tokio::spawn(node::run(options, async move {
@@ -404,9 +418,20 @@ async fn truth_driver(
     }
 }
 
-async fn drive_to_goal(controller: ControllerKind, goal: (f64, f64)) {
+/// Drives to `goal`; with `record`, the agent records a run log there, which is checked and
+/// replayed after the agent stopped.
+async fn drive_to_goal(controller: ControllerKind, goal: (f64, f64), record: Option<&Path>) {
     let h = Harness::start("task_a", goal, Base::TruthDriver).await;
-    let (stop_agent, agent) = h.spawn_agent(h.config(controller));
+    let (stop_agent, agent) = h.spawn_agent_recording(
+        h.config(controller),
+        record.map(|path| node::RecordOptions {
+            path: path.to_path_buf(),
+            log: fleet_log::LogOptions {
+                camera: true,
+                ..fleet_log::LogOptions::default()
+            },
+        }),
+    );
     h.wait_for("driving", Duration::from_secs(10), |h| {
         h.state() == Some(AgentState::Driving)
     })
@@ -430,21 +455,93 @@ async fn drive_to_goal(controller: ControllerKind, goal: (f64, f64)) {
     );
     stop_agent.send(()).unwrap();
     agent.await.unwrap().unwrap();
+    let published = h.rec.poses.lock().unwrap().len();
     h.shutdown().await;
+    if let Some(path) = record {
+        check_live_log(path, published);
+    }
+}
+
+/// The log of a live agent: what it received and published, in processing order, and a replay
+/// of its localization that reproduces every published pose exactly.
+fn check_live_log(path: &Path, published: usize) {
+    assert!(!fleet_log::partial_path(path).exists());
+    let log = fleet_log::RunLog::open(path).unwrap();
+    let counts = log.counts();
+    println!("live log {}: {counts:?}", path.display());
+    let map = log.map().unwrap();
+    assert_eq!((map.name.as_str(), map.version), ("plan", 1));
+    assert_eq!(map.source, "robot-agent");
+    let grid = map_store::load_ros_map(
+        &sim::Scenario::load(&scenario("task_a"))
+            .unwrap()
+            .floor_plan_path(&scenario("task_a")),
+        &ImportLimits::default(),
+    )
+    .unwrap()
+    .grid;
+    // The map store's content hash, which the agent recorded from the map it was served.
+    assert_eq!(
+        map.content_hash.as_deref(),
+        Some(map_store::store::content_hash(&grid).as_str())
+    );
+    assert!(map.initial_pose.is_some());
+    for topic in [
+        fleet_log::Topic::Odom,
+        fleet_log::Topic::Scan,
+        fleet_log::Topic::Camera,
+        fleet_log::Topic::AmclPose,
+        fleet_log::Topic::Intention,
+        fleet_log::Topic::CmdVel,
+    ] {
+        assert!(
+            counts.get(&topic).copied().unwrap_or(0) > 5,
+            "{topic}: {counts:?}"
+        );
+    }
+    // Every pose the test's planner got, the log has (the log may hold the last one or two
+    // that the planner's subscriber had not taken when it stopped).
+    let poses = counts[&fleet_log::Topic::AmclPose];
+    assert!(
+        poses >= published && poses <= published + 3,
+        "{poses} vs {published}"
+    );
+    // Odometry at 20 Hz, scans at 10 Hz: stamps increase on each sensor topic.
+    for topic in [fleet_log::Topic::Odom, fleet_log::Topic::Scan] {
+        let stamps: Vec<u64> = log
+            .as_recorded()
+            .iter()
+            .filter(|e| e.message.topic() == topic)
+            .map(|e| e.log_time_ns)
+            .collect();
+        assert!(stamps.windows(2).all(|w| w[0] < w[1]), "{topic}");
+    }
+    let config = robot_agent::replay::recorded_config(&log).unwrap();
+    let replay = robot_agent::replay::replay(&log, &grid, &config).unwrap();
+    println!(
+        "{}",
+        robot_agent::replay::markdown(std::slice::from_ref(&replay.summary))
+    );
+    assert_eq!(replay.summary.map_matches, Some(true));
+    assert_eq!(replay.poses.len(), poses);
+    // Same filter, same seed, same inputs in the same order: the same estimates, bit for bit.
+    assert_eq!(replay.summary.max_live_difference_m, Some(0.0));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 3)]
 async fn path_tracker_drives_to_a_goal() {
     let _g = SERIAL.lock().await;
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("live.mcap");
     // Straight down the start corridor, 3.5 m.
-    drive_to_goal(ControllerKind::PathTracker, (6.5, 4.0)).await;
+    drive_to_goal(ControllerKind::PathTracker, (6.5, 4.0), Some(&log)).await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 3)]
 async fn dynamic_window_drives_round_a_corner() {
     let _g = SERIAL.lock().await;
     // A 90-degree left turn into the side corridor, then 4 m up it.
-    drive_to_goal(ControllerKind::DynamicWindow, (3.0, 8.0)).await;
+    drive_to_goal(ControllerKind::DynamicWindow, (3.0, 8.0), None).await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 3)]

@@ -76,6 +76,13 @@ pub enum Cmd {
         camera_hz: f64,
         #[arg(long, default_value_t = 500)]
         cmd_timeout_ms: u64,
+        /// Record the first robot's odometry, scans and ground truth as a run log (MCAP,
+        /// written as FILE.partial until the driver stops; docs/logs.md).
+        #[arg(long)]
+        record: Option<PathBuf>,
+        /// Also record the first robot's camera (JPEG) in the run log.
+        #[arg(long, requires = "record")]
+        record_camera: bool,
     },
     /// Measure camera frames/s and lock-step steps/s; writes JSON and prints a markdown table.
     Bench {
@@ -172,6 +179,8 @@ pub fn run(cli: Cli) -> Result<()> {
             scan_hz,
             camera_hz,
             cmd_timeout_ms,
+            record,
+            record_camera,
         } => {
             if robots == 0 {
                 bail!("invalid --robots 0: need at least one robot");
@@ -198,12 +207,39 @@ pub fn run(cli: Cli) -> Result<()> {
                 writeln!(stdout, "{}", roster.to_line()?)?;
                 stdout.flush()?;
             }
+            let recorder = match &record {
+                Some(path) => {
+                    let plan_path = world.scenario.floor_plan_path(&scenario);
+                    let plan_path = std::path::absolute(&plan_path).unwrap_or(plan_path);
+                    let mut r = fleet_log::Recorder::start(
+                        path,
+                        fleet_log::LogOptions {
+                            camera: record_camera,
+                            ..fleet_log::LogOptions::default()
+                        },
+                    )?;
+                    r.record(fleet_log::LogMessage::Map(driver::log_map_info(
+                        &world,
+                        Some(&plan_path),
+                    )));
+                    Some(r)
+                }
+                None => None,
+            };
             let rt = tokio::runtime::Runtime::new()?;
             rt.block_on(async move {
                 // Multicast scouting only when asked for: two demos on one host must not drive
                 // each other's robots.
                 let session = zenoh.open().await?;
-                driver::run(&session, world, &site, driver_config, terminated()).await?;
+                driver::run_recording(
+                    &session,
+                    world,
+                    &site,
+                    driver_config,
+                    recorder,
+                    terminated(),
+                )
+                .await?;
                 session
                     .close()
                     .await

@@ -4,11 +4,15 @@
 //! `protocol::keys`, encoded by `protocol`'s codec) and obeys `cmd_vel`. Physics steps at the
 //! odometry rate in wall-clock time; scan and camera are published at their own rates. A command
 //! older than `cmd_timeout_ms` counts as stop, so a dead agent cannot leave a robot driving.
+//!
+//! [`run_recording`] also records the first robot's odometry, scans, ground truth (and camera
+//! when asked) as a run log (`fleet-log`; `sim run --record FILE`) on a background thread.
 
 use std::future::Future;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use fleet_log::{LogMessage, Recorder, StampedPose};
 use protocol::keys::{self, RobotTopic};
 use protocol::{CmdVel, SiteId};
 use serde::{Deserialize, Serialize};
@@ -53,6 +57,8 @@ pub enum DriverError {
     Publish(#[from] protocol::PublishError),
     #[error(transparent)]
     Sim(#[from] crate::world::SimError),
+    #[error("run log: {0}")]
+    Log(#[from] fleet_log::LogError),
 }
 
 impl DriverConfig {
@@ -84,9 +90,51 @@ type Latest = Arc<Mutex<Vec<Option<(Command, Instant)>>>>;
 /// Zenoh declaration or publication failures, invalid settings.
 pub async fn run(
     session: &Session,
+    world: World,
+    site: &SiteId,
+    config: DriverConfig,
+    shutdown: impl Future<Output = ()>,
+) -> Result<(), DriverError> {
+    run_recording(session, world, site, config, None, shutdown).await
+}
+
+/// The `/map` record of a simulator log: the scenario's floor plan and the first robot's true
+/// start (what an operator would give its agent as the initial pose).
+#[must_use]
+pub fn log_map_info(world: &World, plan_path: Option<&std::path::Path>) -> fleet_log::MapInfo {
+    let plan = &world.plan;
+    fleet_log::MapInfo {
+        stamp_ns: world.time_ns(),
+        name: plan_path.and_then(|p| p.file_stem()).map_or_else(
+            || world.scenario.name.clone(),
+            |s| s.to_string_lossy().into_owned(),
+        ),
+        version: 1,
+        path: plan_path.map(|p| p.display().to_string()),
+        content_hash: Some(fleet_log::grid_content_hash(
+            plan.width_cells(),
+            plan.height_cells(),
+            plan.resolution_m(),
+            plan.origin(),
+            plan.cells(),
+        )),
+        initial_pose: world.ground_truth_pose(0),
+        initial_covariance: None,
+        source: format!("sim: {}", world.scenario.name),
+    }
+}
+
+/// [`run`], recording the first robot into `recorder` (which the caller has given its `/map`
+/// record) and finishing the log when the driver stops.
+///
+/// # Errors
+/// As [`run`], or the log's error when it cannot be finished.
+pub async fn run_recording(
+    session: &Session,
     mut world: World,
     site: &SiteId,
     config: DriverConfig,
+    mut recorder: Option<Recorder>,
     shutdown: impl Future<Output = ()>,
 ) -> Result<(), DriverError> {
     config.validate()?;
@@ -178,15 +226,32 @@ pub async fn run(
                 tracing::warn!(robot = %o.robot_id, "collision with {}", c.with);
             }
             protocol::zenoh_io::publish(&odom_pubs[i], &o.odom).await?;
+            if let Some(r) = recorder.as_mut().filter(|_| i == 0) {
+                r.record(LogMessage::Odom(o.odom.clone()));
+                r.record(LogMessage::GroundTruth(StampedPose {
+                    header: o.odom.header,
+                    pose: o.ground_truth_pose,
+                }));
+                if send_scan {
+                    r.record(LogMessage::Scan(o.scan.clone()));
+                }
+            }
             if send_scan {
                 protocol::zenoh_io::publish(&scan_pubs[i], &o.scan).await?;
             }
             if send_camera {
                 let frame = world.camera_frame(i)?;
                 protocol::zenoh_io::publish(&camera_pubs[i], &frame).await?;
+                if let Some(r) = recorder.as_mut().filter(|_| i == 0) {
+                    r.record_camera(&frame);
+                }
             }
         }
     }
     drop(subscribers);
+    if let Some(r) = recorder {
+        let path = r.finish()?;
+        tracing::info!(path = %path.display(), "run log written");
+    }
     Ok(())
 }

@@ -1,4 +1,5 @@
-//! The real-time Zenoh driver on loopback: cmd_vel in, scan/odom/camera out, the robot moves.
+//! The real-time Zenoh driver on loopback: cmd_vel in, scan/odom/camera out, the robot moves;
+//! with a recorder (`sim run --record`), the first robot's sensors and truth go to a run log.
 
 // Test code: a failed unwrap is a failed test.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
@@ -27,6 +28,22 @@ async fn driver_obeys_cmd_vel_and_publishes_sensors() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/train_hall.yaml");
     let mut world = World::from_scenario_file(&path, SimConfig::default()).unwrap();
     world.add_robots_at_start(1).unwrap();
+    let start = world.ground_truth_pose(0).unwrap();
+    let log_dir = tempfile::tempdir().unwrap();
+    let log_path = log_dir.path().join("sim.mcap");
+    let mut recorder = fleet_log::Recorder::start(
+        &log_path,
+        fleet_log::LogOptions {
+            camera: true,
+            ..fleet_log::LogOptions::default()
+        },
+    )
+    .unwrap();
+    let plan_path = world.scenario.floor_plan_path(&path);
+    recorder.record(fleet_log::LogMessage::Map(driver::log_map_info(
+        &world,
+        Some(&plan_path),
+    )));
 
     let seen = Arc::new(Mutex::new(Seen::default()));
     let s1 = Arc::clone(&seen);
@@ -69,7 +86,15 @@ async fn driver_obeys_cmd_vel_and_publishes_sensors() {
             cmd_timeout_ms: 300,
             ..DriverConfig::default()
         };
-        driver::run(&sim_session, world, &driver_site, config, shutdown).await
+        driver::run_recording(
+            &sim_session,
+            world,
+            &driver_site,
+            config,
+            Some(recorder),
+            shutdown,
+        )
+        .await
     });
 
     let cmd_key: zenoh::key_expr::KeyExpr<'static> =
@@ -112,4 +137,27 @@ async fn driver_obeys_cmd_vel_and_publishes_sensors() {
     stop_tx.send(()).unwrap();
     driver_task.await.unwrap().unwrap();
     client.close().await.unwrap();
+
+    // The run log: the driver finished it when it stopped.
+    let log = fleet_log::RunLog::open(&log_path).unwrap();
+    let counts = log.counts();
+    let map = log.map().unwrap();
+    assert_eq!(map.initial_pose, Some(start));
+    assert_eq!(map.name, "hall");
+    assert!(map.content_hash.is_some());
+    let odom = counts[&fleet_log::Topic::Odom];
+    // Odometry and truth every step (20 Hz), scans and camera every other one (10 Hz).
+    assert!(odom > 20, "{counts:?}");
+    assert_eq!(counts[&fleet_log::Topic::GroundTruth], odom);
+    let scans = counts[&fleet_log::Topic::Scan];
+    assert!(scans.abs_diff(odom / 2) <= 1, "{counts:?}");
+    assert!(
+        counts[&fleet_log::Topic::Camera].abs_diff(scans) <= 1,
+        "{counts:?}"
+    );
+    let truth = log.ground_truth();
+    assert!(truth
+        .windows(2)
+        .all(|w| w[0].header.stamp_ns < w[1].header.stamp_ns));
+    assert!(truth.last().unwrap().pose.distance_m(&start) > 0.2);
 }

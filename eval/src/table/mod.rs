@@ -8,6 +8,7 @@
 
 pub mod audit;
 pub mod judge;
+pub mod log;
 pub mod report;
 pub mod run;
 
@@ -48,6 +49,9 @@ pub enum TableError {
     Setup { what: &'static str, reason: String },
     #[error("cannot write {}: {reason}", path.display())]
     Write { path: PathBuf, reason: String },
+    /// A run log (`--record-dir`, `--log`) that cannot be written or read; names the file.
+    #[error("run log: {0}")]
+    Log(#[from] fleet_log::LogError),
 }
 
 /// Settings shared by every run of a table.
@@ -74,6 +78,8 @@ pub struct TableOptions {
     pub expert: ExpertConfig,
     /// Folder of `<method>.onnx` for `dlm`, `lpe` and `none`.
     pub models_dir: PathBuf,
+    /// Record every run as a run log in this folder ([`log`], docs/logs.md).
+    pub record: Option<log::RecordSettings>,
 }
 
 impl Default for TableOptions {
@@ -89,6 +95,7 @@ impl Default for TableOptions {
             intention: deterministic_intention_config(),
             expert: ExpertConfig::default(),
             models_dir: PathBuf::from("models"),
+            record: None,
         }
     }
 }

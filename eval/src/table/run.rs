@@ -9,7 +9,9 @@
 //! depends on nothing but its seed.
 //!
 //! Only the [`judge`](super::judge) (the person watching) and the privileged expert read the
-//! ground truth.
+//! ground truth. With [`TableOptions::record`] a run also writes a run log
+//! ([`log`](super::log)): sensors, the published poses, intentions, commands, the truth and
+//! every re-initialisation after an intervention.
 
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, PoisonError};
@@ -28,6 +30,7 @@ use sim::scenario::Role;
 use sim::{Command, Scenario, SimConfig, World};
 
 use super::judge::{self, Collisions, GoalDistance};
+use super::log::RunRecorder;
 use super::{TableError, TableOptions};
 use crate::expert::{Expert, SharedTruth, TruthView};
 use crate::metrics::{self, TrajectorySample};
@@ -339,6 +342,19 @@ pub fn run_with(
         version: 1,
     };
     let initial_covariance = agent.localization.initial_covariance();
+    let mut recorder = match &options.record {
+        Some(settings) => Some(RunRecorder::start(
+            settings,
+            prepared,
+            method,
+            seed,
+            &agent,
+            start,
+            initial_covariance,
+        )?),
+        None => None,
+    };
+    let record_camera = recorder.as_ref().is_some_and(RunRecorder::wants_camera);
     let mut supervisor = Supervisor::new(agent, map, &prepared.plan, controller)
         .map_err(|e| setup("agent")(e.to_string()))?;
     let mut pipeline =
@@ -378,6 +394,7 @@ pub fn run_with(
     let mut best_remaining = prepared.goal_distance[0].at(start.x_m, start.y_m);
     let mut progress_s = 0.0;
     let mut t_s = 0.0;
+    let mut time_ns = 0u64;
     let mut failure: Option<String> = None;
     let mut finished_s: Option<f64> = None;
 
@@ -387,6 +404,10 @@ pub fn run_with(
         let now = epoch + Duration::from_nanos(obs.time_ns);
         let o = &obs.robots[0];
         let truth_pose = o.ground_truth_pose;
+        time_ns = obs.time_ns;
+        if let Some(r) = recorder.as_mut() {
+            r.sensors(&o.odom, &o.scan, truth_pose)?;
+        }
         path_length_m += truth_pose.distance_m(&last_truth);
         last_truth = truth_pose;
         trace.points_m.push((truth_pose.x_m, truth_pose.y_m));
@@ -422,6 +443,9 @@ pub fn run_with(
             .on_scan(o.scan.clone(), now, obs.time_ns)
             .map_err(|e| setup("agent scan")(e.to_string()))?;
         if let Some(e) = &estimate {
+            if let Some(r) = recorder.as_mut() {
+                r.pose(e)?;
+            }
             let err = e.pose.distance_m(&truth_pose);
             let yaw_err = normalize_angle(e.pose.yaw_rad - truth_pose.yaw_rad)
                 .abs()
@@ -461,6 +485,15 @@ pub fn run_with(
                 supervisor
                     .set_pose(put, initial_covariance)
                     .map_err(|e| setup("intervention")(e.to_string()))?;
+                if let Some(r) = recorder.as_mut() {
+                    // Where the live filter restarted, so that a replay restarts there too.
+                    r.reinit(
+                        protocol::Header::new(u64::from(interventions) + 1, obs.time_ns),
+                        put,
+                        initial_covariance,
+                    )?;
+                    r.cmd(obs.time_ns, 0.0, 0.0)?;
+                }
                 pipeline.clear_trail();
                 if let Some(p) = truth_pipeline.as_mut() {
                     p.clear_trail();
@@ -560,15 +593,24 @@ pub fn run_with(
             if observer.is_some() {
                 answered = Some(intention.clone());
             }
+            if let Some(r) = recorder.as_mut() {
+                r.intention(&intention)?;
+            }
             if let Err(reason) = supervisor.on_intention(intention) {
                 tracing::warn!(scenario = %name, "intention refused: {reason}");
             }
         }
-        if reads_camera {
+        if reads_camera || record_camera {
+            // Rendering draws no random numbers: recording the camera changes nothing else.
             let frame = world
                 .camera_frame(0)
                 .map_err(|e| setup("camera")(e.to_string()))?;
-            supervisor.on_camera(frame);
+            if let Some(r) = recorder.as_mut() {
+                r.camera(&frame)?;
+            }
+            if reads_camera {
+                supervisor.on_camera(frame);
+            }
         }
         if method == ControllerKind::Expert {
             *truth.lock().unwrap_or_else(PoisonError::into_inner) = TruthView::of(&world, 0);
@@ -600,6 +642,9 @@ pub fn run_with(
                 break;
             }
         }
+        if let Some(r) = recorder.as_mut() {
+            r.cmd(obs.time_ns, cmd.v_mps, cmd.omega_radps)?;
+        }
     }
 
     let goals_reached = goal_index.min(goals_total);
@@ -626,33 +671,34 @@ pub fn run_with(
     let jerk = segments_jerk(&samples);
     #[allow(clippy::cast_precision_loss)]
     let n = cycles.max(1) as f64;
-    Ok((
-        RunResult {
-            scenario: name,
-            role,
-            method,
-            seed,
-            success,
-            failure,
-            interventions,
-            intervention_log,
-            collisions,
-            time_s: finished_s.unwrap_or(t_s),
-            smoothness: jerk,
-            path_length_m,
-            min_person_distance_m: min_person,
-            min_glass_distance_m: min_glass,
-            goals_reached,
-            goals_total,
-            mean_position_error_m: sum_err / n,
-            max_position_error_m: max_err,
-            mean_heading_error_deg: sum_yaw_err / n,
-            max_heading_error_deg: max_yaw_err,
-            intention_audit: truth_pipeline.is_some().then(|| auditor.finish()),
-            wall_s: started.elapsed().as_secs_f64(),
-        },
-        trace,
-    ))
+    let result = RunResult {
+        scenario: name,
+        role,
+        method,
+        seed,
+        success,
+        failure,
+        interventions,
+        intervention_log,
+        collisions,
+        time_s: finished_s.unwrap_or(t_s),
+        smoothness: jerk,
+        path_length_m,
+        min_person_distance_m: min_person,
+        min_glass_distance_m: min_glass,
+        goals_reached,
+        goals_total,
+        mean_position_error_m: sum_err / n,
+        max_position_error_m: max_err,
+        mean_heading_error_deg: sum_yaw_err / n,
+        max_heading_error_deg: max_yaw_err,
+        intention_audit: truth_pipeline.is_some().then(|| auditor.finish()),
+        wall_s: started.elapsed().as_secs_f64(),
+    };
+    if let Some(r) = recorder {
+        r.finish(time_ns, &result)?;
+    }
+    Ok((result, trace))
 }
 
 /// Mean |jerk| over the trajectory's pieces between interventions, weighted by their lengths
