@@ -44,8 +44,7 @@ pub use camera::{CompressedImage, Timestamp};
 pub use reader::{LogEntry, LogMessage, RunLog};
 pub use recorder::Recorder;
 pub use topics::{
-    grid_content_hash, InitialPose, MapInfo, RunSummary, StampedPose, Topic, MESSAGE_ENCODING,
-    SCHEMA_ENCODING,
+    InitialPose, MapInfo, RunSummary, StampedPose, Topic, MESSAGE_ENCODING, SCHEMA_ENCODING,
 };
 pub use writer::{LogOptions, LogWriter};
 

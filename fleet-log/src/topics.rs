@@ -7,7 +7,6 @@
 use protocol::{Header, Pose2D};
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
-use sha2::{Digest, Sha256};
 
 /// MCAP message encoding of every channel.
 pub const MESSAGE_ENCODING: &str = "json";
@@ -276,7 +275,7 @@ pub struct MapInfo {
     pub version: u32,
     /// The floor plan file (ROS map YAML) when the recorder loaded one.
     pub path: Option<String>,
-    /// Hex sha256 of the grid as the map store computes it ([`grid_content_hash`]).
+    /// Hex sha256 of the grid (`map_core::OccupancyGrid::content_hash`), as the map store names versions.
     pub content_hash: Option<String>,
     /// The pose the filter was initialised at; `None`: global localization.
     pub initial_pose: Option<Pose2D>,
@@ -321,26 +320,4 @@ pub struct RunSummary {
     pub interventions: u32,
     /// Simulated seconds until the last goal was reached (or the run ended).
     pub time_s: f64,
-}
-
-/// Hex sha256 over the little-endian width, height, resolution, origin (x, y, yaw) and cells:
-/// the map store's content hash (`map_store::content_hash`), so a log names the stored map
-/// version it localized on.
-#[must_use]
-pub fn grid_content_hash(
-    width_cells: u32,
-    height_cells: u32,
-    resolution_m: f64,
-    origin: Pose2D,
-    cells: &[u8],
-) -> String {
-    let mut h = Sha256::new();
-    h.update(width_cells.to_le_bytes());
-    h.update(height_cells.to_le_bytes());
-    h.update(resolution_m.to_le_bytes());
-    for v in [origin.x_m, origin.y_m, origin.yaw_rad] {
-        h.update(v.to_le_bytes());
-    }
-    h.update(cells);
-    hex::encode(h.finalize())
 }

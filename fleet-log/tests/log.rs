@@ -358,13 +358,3 @@ fn the_recorder_thread_keeps_the_order_and_finishes_the_file() {
     let err = Recorder::start(&blocker.join("x.mcap"), LogOptions::default()).unwrap_err();
     assert!(err.to_string().contains("file"), "{err}");
 }
-
-#[test]
-fn the_content_hash_is_sha256_of_the_grid_fields() {
-    let h = fleet_log::grid_content_hash(2, 1, 0.05, Pose2D::new(0.0, 0.0, 0.0), &[0, 100]);
-    assert_eq!(h.len(), 64);
-    assert_ne!(
-        h,
-        fleet_log::grid_content_hash(2, 1, 0.05, Pose2D::new(0.0, 0.0, 0.0), &[0, 0])
-    );
-}

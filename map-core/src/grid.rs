@@ -238,6 +238,23 @@ pub struct OccupancyGrid {
 }
 
 impl OccupancyGrid {
+    /// Hex sha256 over the little-endian width, height, resolution, origin (x, y, yaw) and
+    /// cells: what names a map version in the map store and in run logs.
+    #[must_use]
+    pub fn content_hash(&self) -> String {
+        use sha2::{Digest, Sha256};
+        let mut h = Sha256::new();
+        h.update(self.width_cells().to_le_bytes());
+        h.update(self.height_cells().to_le_bytes());
+        h.update(self.resolution_m().to_le_bytes());
+        let o = self.origin();
+        for v in [o.x_m, o.y_m, o.yaw_rad] {
+            h.update(v.to_le_bytes());
+        }
+        h.update(self.cells());
+        hex::encode(h.finalize())
+    }
+
     /// Builds a grid, checking that the cell buffer, size and resolution agree.
     ///
     /// # Errors

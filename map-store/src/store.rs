@@ -33,7 +33,6 @@ use std::time::{SystemTime, UNIX_EPOCH};
 use protocol::{MapGrid, MapId, MapMeta, MapName, Pose2D};
 use redb::{Database, ReadableTable, TableDefinition};
 use serde::{Deserialize, Serialize};
-use sha2::{Digest, Sha256};
 
 use crate::error::MapError;
 use crate::grid::OccupancyGrid;
@@ -108,19 +107,10 @@ impl StoredMap {
     }
 }
 
-/// Hex sha256 over the little-endian width, height, resolution, origin (x, y, yaw) and cells.
+/// The grid's content hash ([`OccupancyGrid::content_hash`]), which names its stored version.
 #[must_use]
 pub fn content_hash(grid: &OccupancyGrid) -> String {
-    let mut h = Sha256::new();
-    h.update(grid.width_cells().to_le_bytes());
-    h.update(grid.height_cells().to_le_bytes());
-    h.update(grid.resolution_m().to_le_bytes());
-    let o = grid.origin();
-    for v in [o.x_m, o.y_m, o.yaw_rad] {
-        h.update(v.to_le_bytes());
-    }
-    h.update(grid.cells());
-    hex::encode(h.finalize())
+    grid.content_hash()
 }
 
 /// The versioned map database.

@@ -197,16 +197,10 @@ pub fn replay(
         path: path.clone(),
         reason: "no /map record: not a run log of this fleet".into(),
     })?;
-    let map_matches = map.content_hash.as_ref().map(|recorded| {
-        *recorded
-            == fleet_log::grid_content_hash(
-                grid.width_cells(),
-                grid.height_cells(),
-                grid.resolution_m(),
-                grid.origin(),
-                grid.cells(),
-            )
-    });
+    let map_matches = map
+        .content_hash
+        .as_ref()
+        .map(|recorded| *recorded == grid.content_hash());
     let mut config = config.clone();
     config.localization.initial_pose = map.initial_pose;
     let map_ref = MapRef {

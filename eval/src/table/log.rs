@@ -73,13 +73,7 @@ impl RunRecorder {
                 .is_file()
                 .then(|| std::path::absolute(&plan_path).unwrap_or(plan_path.clone()))
                 .map(|p| p.display().to_string()),
-            content_hash: Some(fleet_log::grid_content_hash(
-                plan.width_cells(),
-                plan.height_cells(),
-                plan.resolution_m(),
-                plan.origin(),
-                plan.cells(),
-            )),
+            content_hash: Some(plan.content_hash()),
             initial_pose: Some(start),
             initial_covariance: Some(initial_covariance),
             source: format!("eval: {name} {method} seed {seed}"),
