@@ -304,17 +304,10 @@ def run_ours(log: RunLog, agent: Path, particles: int | None):
 
 
 def read_poses(path: Path):
-    text = path.read_text()
-    if path.suffix == ".csv" or text.startswith("stamp_ns,"):
-        lines = text.splitlines()
-        head = lines[0].split(",")
-        for l in lines[1:]:
-            vals = l.split(",")
-            yield {k: (float(v) if v not in ("", "true", "false") else v == "true") for k, v in zip(head, vals)}
-    else:
-        for l in text.splitlines():
-            if l.strip():
-                yield json.loads(l)
+    """`robot-agent replay --out *.jsonl`: one estimate per scan."""
+    for l in path.read_text().splitlines():
+        if l.strip():
+            yield json.loads(l)
 
 
 # ----- comparison --------------------------------------------------------------------------

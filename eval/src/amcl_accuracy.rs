@@ -134,26 +134,8 @@ pub fn from_log(
         what: "replay",
         reason: format!("{}: {reason}", log_path.display()),
     };
-    let map_path: PathBuf = match map {
-        Some(m) => m.to_path_buf(),
-        None => log
-            .map()
-            .and_then(|m| m.path.clone())
-            .map(PathBuf::from)
-            .ok_or_else(|| setup("the log names no floor plan file; give --map".into()))?,
-    };
-    let grid = map_core::load_ros_map(&map_path, &map_core::ImportLimits::default())
-        .map_err(|e| setup(format!("map {}: {e}", map_path.display())))?
-        .grid;
-    let config = match config {
-        Some(c) => c.clone(),
-        None => robot_agent::replay::recorded_config(&log).map_err(|e| setup(e.to_string()))?,
-    };
-    let replay =
-        robot_agent::replay::replay(&log, &grid, &config).map_err(|e| setup(e.to_string()))?;
-    if replay.summary.map_matches == Some(false) {
-        tracing::warn!(log = %log_path.display(), map = %map_path.display(), "not the map the log was recorded on");
-    }
+    let replay = robot_agent::replay::replay_files(&log, map, config.cloned())
+        .map_err(|e| setup(e.to_string()))?;
     let s = &replay.summary;
     let position = s.position_error_m.ok_or_else(|| {
         setup("no ground truth in the log (record it with eval or sim run --record)".into())

@@ -178,10 +178,7 @@ pub fn node_options(cli: &Cli) -> anyhow::Result<NodeOptions> {
 /// An unreadable log, map or configuration, or a log the filter cannot replay.
 pub fn run_replay(args: &ReplayArgs) -> anyhow::Result<()> {
     let log = fleet_log::RunLog::open(&args.log)?;
-    let grid = map_core::load_ros_map(&args.map, &map_core::ImportLimits::default())
-        .with_context(|| format!("map {}", args.map.display()))?
-        .grid;
-    let config = match &args.config {
+    let mut config = match &args.config {
         Some(path) => {
             let text = std::fs::read_to_string(path)
                 .with_context(|| format!("cannot read config {}", path.display()))?;
@@ -189,7 +186,6 @@ pub fn run_replay(args: &ReplayArgs) -> anyhow::Result<()> {
         }
         None => crate::replay::recorded_config(&log)?,
     };
-    let mut config = config;
     if let Some(n) = args.particles {
         config.amcl.min_particles = n;
         config.amcl.max_particles = n;
@@ -197,13 +193,7 @@ pub fn run_replay(args: &ReplayArgs) -> anyhow::Result<()> {
             .validate()
             .with_context(|| format!("--particles {n}"))?;
     }
-    let replay = crate::replay::replay(&log, &grid, &config)?;
-    if replay.summary.map_matches == Some(false) {
-        eprintln!(
-            "warning: {} is not the map the log was recorded on (content hash differs)",
-            args.map.display()
-        );
-    }
+    let replay = crate::replay::replay_files(&log, Some(&args.map), Some(config))?;
     if let Some(out) = &args.out {
         crate::replay::write_poses(out, &replay.poses)?;
     }

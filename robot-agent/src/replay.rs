@@ -154,6 +154,48 @@ pub fn recorded_config(log: &RunLog) -> Result<AgentConfig, ReplayError> {
     Ok(config)
 }
 
+/// Replays a log from files: on `map` (a ROS map YAML; `None`: the floor plan file the log
+/// names) with `config` (`None`: the configuration the log recorded, which reproduces the live
+/// run). A map whose content hash differs from the log's is used, with a warning.
+///
+/// # Errors
+/// [`ReplayError::Invalid`] naming the log when no map is given or named or the map cannot be
+/// loaded, and the errors of [`recorded_config`] and [`replay`].
+pub fn replay_files(
+    log: &RunLog,
+    map: Option<&Path>,
+    config: Option<AgentConfig>,
+) -> Result<Replay, ReplayError> {
+    let invalid = |reason: String| ReplayError::Invalid {
+        path: log.path().to_path_buf(),
+        reason,
+    };
+    let map_path: PathBuf = match map {
+        Some(m) => m.to_path_buf(),
+        None => log
+            .map()
+            .and_then(|m| m.path.clone())
+            .map(PathBuf::from)
+            .ok_or_else(|| invalid("the log names no floor plan file; give --map".into()))?,
+    };
+    let grid = map_core::load_ros_map(&map_path, &map_core::ImportLimits::default())
+        .map_err(|e| invalid(format!("map {}: {e}", map_path.display())))?
+        .grid;
+    let config = match config {
+        Some(c) => c,
+        None => recorded_config(log)?,
+    };
+    let replay = replay(log, &grid, &config)?;
+    if replay.summary.map_matches == Some(false) {
+        tracing::warn!(
+            log = %log.path().display(),
+            map = %map_path.display(),
+            "not the map the log was recorded on (content hash differs)"
+        );
+    }
+    Ok(replay)
+}
+
 /// The true pose at `stamp_ns`: the sample with that stamp, else linear between the two around
 /// it when they are at most 0.25 s apart.
 fn truth_at(truth: &[StampedPose], stamp_ns: u64) -> Option<Pose2D> {

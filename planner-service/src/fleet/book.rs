@@ -266,9 +266,6 @@ impl TaskBook {
     /// queue is walked only while a robot on it is free.
     pub fn dispatch(&mut self, robots: &RobotRegistry, now: Now) -> Vec<Effect> {
         let mut effects = Vec::new();
-        if robots.iter().all(|r| self.assignments.contains_key(&r.id)) {
-            return effects;
-        }
         let mut maps: Vec<MapName> = self.queued.keys().cloned().collect();
         maps.sort();
         for map in maps {
@@ -286,19 +283,14 @@ impl TaskBook {
                 let Some(first) = self.live.get(&id).and_then(|t| t.goals.first()) else {
                     continue;
                 };
-                let mut free = robots
+                let Some(robot) = robots
                     .iter()
                     .filter(|r| !self.assignments.contains_key(&r.id))
                     .filter_map(|r| Some((r.distance_on(&map, first)?, &r.id)))
-                    .peekable();
-                if free.peek().is_none() {
-                    // No robot on this map is free: the rest of its queue waits too.
-                    break;
-                }
-                let Some(robot) = free
                     .min_by(|a, b| a.0.total_cmp(&b.0).then_with(|| a.1.cmp(b.1)))
                     .map(|(_, r)| r.clone())
                 else {
+                    // No robot on this map is free: the rest of its queue waits too.
                     break;
                 };
                 let state = TaskState::Assigned {
