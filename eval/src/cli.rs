@@ -5,6 +5,9 @@
 //! prints a markdown table and writes the figures as JSON. `--record-dir` writes one run log
 //! per task (docs/logs.md); `--log FILE|DIR` (repeatable) replays logs instead of driving.
 //!
+//! `eval kidnap [--map depot.yaml] [--trials 10] [--distance-m 5] [--out F.json]`: kidnap
+//! trials on the depot map (see [`crate::kidnap`]).
+//!
 //! `eval table [--tasks a,b,c,d,e] [--scenario FILE]... [--behaviour] [--methods LIST]
 //! [--seeds N] [--models DIR] [--jobs N] [--record-dir DIR] --out DIR`: the paper's Table 1 and
 //! Figure 5 in closed loop (see [`crate::table`]).
@@ -20,6 +23,7 @@ use clap::{Parser, Subcommand};
 use robot_agent::{AgentConfig, ControllerKind};
 
 use crate::amcl_accuracy::{self, AccuracyOptions, TaskAccuracy};
+use crate::kidnap;
 use crate::table::{self, TableOptions};
 
 /// Closed-loop evaluation of the intention fleet in the simulator.
@@ -36,6 +40,33 @@ pub enum Cmd {
     Table(TableArgs),
     /// Demonstrations of the privileged expert on the training scenarios, for imitation.
     Record(RecordArgs),
+    /// Kidnap trials on the depot map: the robot is carried away unseen; does the agent report
+    /// lost localization and re-converge (lock-step)?
+    Kidnap {
+        /// The depot floor plan (ROS map YAML).
+        #[arg(long, default_value = "../shared/maps/nav2/depot.yaml")]
+        map: PathBuf,
+        #[arg(long, default_value_t = 10)]
+        trials: u64,
+        /// Trial k runs with seed first_seed + k.
+        #[arg(long, default_value_t = 1)]
+        first_seed: u64,
+        /// How far the robot is carried (m).
+        #[arg(long, default_value_t = 5.0)]
+        distance_m: f64,
+        /// Simulated time of the kidnap (s).
+        #[arg(long, default_value_t = 15.0)]
+        kidnap_at_s: f64,
+        /// Each trial ends this long after the kidnap (s).
+        #[arg(long, default_value_t = 30.0)]
+        after_s: f64,
+        /// Agent configuration TOML whose [amcl], [limits] and controller tables are used.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Write the trials as JSON here.
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// AMCL accuracy against the simulator's ground truth on tasks A–E (lock-step).
     AmclAccuracy {
         /// Comma-separated task letters.
@@ -476,6 +507,55 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
     match &cli.command {
         Cmd::Table(args) => run_table(args),
         Cmd::Record(args) => run_record(args),
+        Cmd::Kidnap {
+            map,
+            trials,
+            first_seed,
+            distance_m,
+            kidnap_at_s,
+            after_s,
+            config,
+            out,
+        } => {
+            let defaults = kidnap::KidnapOptions::default();
+            let options = kidnap::KidnapOptions {
+                trials: *trials,
+                first_seed: *first_seed,
+                distance_m: *distance_m,
+                kidnap_at_s: *kidnap_at_s,
+                after_s: *after_s,
+                run: TableOptions {
+                    agent: read_agent_config(config.as_deref())?,
+                    ..defaults.run.clone()
+                },
+                ..defaults
+            };
+            let bar = indicatif::ProgressBar::new(*trials);
+            bar.set_style(
+                indicatif::ProgressStyle::with_template("kidnap {bar:30} {pos}/{len} trials {msg}")
+                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            );
+            let report = kidnap::run(map, &options, |t| {
+                bar.inc(1);
+                bar.set_message(format!(
+                    "seed {}: {}",
+                    t.seed,
+                    if t.recovered {
+                        "recovered"
+                    } else {
+                        "not recovered"
+                    }
+                ));
+            })?;
+            bar.finish_and_clear();
+            println!("{}", kidnap::markdown(&report));
+            if let Some(out) = out {
+                let json = serde_json::to_string_pretty(&report)?;
+                std::fs::write(out, json)
+                    .with_context(|| format!("cannot write {}", out.display()))?;
+            }
+            Ok(())
+        }
         Cmd::AmclAccuracy {
             tasks,
             seed,

@@ -2,6 +2,7 @@
 //!
 //! - [`metrics`]: the metrics of Table 1.
 //! - [`amcl_accuracy`]: AMCL against the simulator's ground truth on tasks A–E, in lock-step.
+//! - [`kidnap`]: kidnap trials on the depot map: lost localization reported, re-convergence.
 //! - [`expert`]: the privileged expert (method `expert`) that reads the ground truth and
 //!   demonstrates for imitation.
 //! - [`record`]: demonstrations of the expert on the training scenarios, recorded as an
@@ -13,6 +14,7 @@ pub mod amcl_accuracy;
 pub mod cli;
 pub mod expert;
 pub mod figure;
+pub mod kidnap;
 pub mod metrics;
 pub mod record;
 pub mod table;

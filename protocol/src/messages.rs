@@ -511,6 +511,9 @@ pub enum AgentState {
     /// Slowing down to a stop; `stop_reason` says why.
     Stopping,
     Stopped,
+    /// Localization is lost (`stop_reason` says so): turning in place, not driving, while the
+    /// localizer searches the map for the robot.
+    Relocalizing,
 }
 
 /// Why an agent is stopping or stopped.

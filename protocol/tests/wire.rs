@@ -247,6 +247,7 @@ fn every_status_and_task_state_round_trips() {
             AgentState::Driving,
             AgentState::Stopping,
             AgentState::Stopped,
+            AgentState::Relocalizing,
         ] {
             round_trip(&AgentStatus {
                 state,

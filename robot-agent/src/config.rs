@@ -42,6 +42,9 @@ pub struct Safety {
     pub max_position_std_m: f64,
     /// Deceleration used to come to a safety stop.
     pub stop_decel_mps2: f64,
+    /// While AMCL relocalizes after losing itself, the robot turns in place at this rate so
+    /// that the laser sweeps the surroundings (Nav2's spin recovery); 0 stands still.
+    pub relocalize_spin_radps: f64,
 }
 
 impl Default for Safety {
@@ -50,6 +53,7 @@ impl Default for Safety {
             intention_deadline_ms: 300,
             max_position_std_m: 0.5,
             stop_decel_mps2: 1.0,
+            relocalize_spin_radps: 1.0,
         }
     }
 }
@@ -201,6 +205,14 @@ impl AgentConfig {
                     reason: "must be a positive, finite number",
                 });
             }
+        }
+        let spin = self.safety.relocalize_spin_radps;
+        if !(spin.is_finite() && spin >= 0.0 && spin <= self.limits.max_turn_radps) {
+            return Err(ConfigError::Invalid {
+                field: "safety.relocalize_spin_radps",
+                value: spin.to_string(),
+                reason: "must lie between 0 and limits.max_turn_radps",
+            });
         }
         if self.safety.intention_deadline_ms == 0 {
             return Err(ConfigError::Invalid {

@@ -309,7 +309,7 @@ impl Supervisor {
 
     #[must_use]
     pub fn localized(&self) -> bool {
-        self.position_std_m() <= self.config.safety.max_position_std_m
+        self.position_std_m() <= self.config.safety.max_position_std_m && !self.amcl.is_lost()
     }
 
     /// Re-initialises localization at `pose` with a row-major 3×3 covariance (x, y, yaw), as an
@@ -484,16 +484,23 @@ impl Supervisor {
     ) -> (Option<(f64, f64)>, AgentState, Option<StopReason>) {
         let stop = |reason| (None, AgentState::Stopping, Some(reason));
         let position_std_m = self.position_std_m();
-        if position_std_m > self.config.safety.max_position_std_m {
+        if position_std_m > self.config.safety.max_position_std_m || self.amcl.is_lost() {
             // Not finite only before the first estimate; the status needs a number.
             let shown = if position_std_m.is_finite() {
                 position_std_m
             } else {
                 f64::MAX
             };
-            return stop(StopReason::LocalizationLost {
+            let reason = StopReason::LocalizationLost {
                 position_std_m: shown,
-            });
+            };
+            let spin = self.config.safety.relocalize_spin_radps;
+            if self.amcl.is_relocalizing() && spin > 0.0 {
+                // Turning in place sweeps the laser over the surroundings and lets the
+                // filter update (it only runs on motion); it cannot run into anything.
+                return (Some((0.0, spin)), AgentState::Relocalizing, Some(reason));
+            }
+            return stop(reason);
         }
         let Some(intention) = self.intention.as_ref() else {
             return stop(StopReason::NoIntention);

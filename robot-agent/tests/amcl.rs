@@ -14,7 +14,8 @@ use protocol::{normalize_angle, Pose2D};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use robot_agent::amcl::{
-    sensor::beam_likelihood, Amcl, AmclConfig, BeamCombination, LikelihoodField, ScanModel,
+    sensor::beam_likelihood, Amcl, AmclConfig, BeamCombination, LaserModel, LikelihoodField,
+    ScanModel,
 };
 
 /// Odometry noise of the simulated base: well below AMCL's (deliberately pessimistic) 0.2.
@@ -28,6 +29,7 @@ struct Sample {
     yaw_rad: f64,
     particles: usize,
     random: usize,
+    lost: bool,
 }
 
 enum Start {
@@ -97,6 +99,7 @@ fn run(
                     yaw_rad: normalize_angle(e.pose.yaw_rad - pose.yaw_rad).abs(),
                     particles: e.particle_count,
                     random: out.random_particles,
+                    lost: out.lost,
                 });
             }
             step += 1;
@@ -439,6 +442,8 @@ fn recovers_from_a_kidnap_with_random_particles() {
         update_min_d_m: 0.25,
         update_min_a_rad: 0.2,
         do_beamskip: true,
+        laser_model: LaserModel::LikelihoodField,
+        relocalization_particles: 0,
         ..AmclConfig::default()
     };
     let after = kidnap_run(config);
@@ -458,9 +463,44 @@ fn recovers_from_a_kidnap_with_random_particles() {
 }
 
 #[test]
+fn notices_a_kidnap_and_relocalizes_with_the_defaults() {
+    // The default filter: the beam model, lost-localization detection and relocalization
+    // (particles spread over the depot, a flatter model, until it has concentrated again
+    // after 5 m of travel; this test world drives on and never turns in place).
+    let config = AmclConfig {
+        seed: 4,
+        ..AmclConfig::default()
+    };
+    let after = kidnap_run(config);
+    report("depot kidnap, relocalization", &after);
+    assert!(
+        after[0].position_m > 1.0,
+        "the kidnap did not displace the estimate"
+    );
+    let noticed = after
+        .iter()
+        .position(|s| s.lost)
+        .expect("never reported lost");
+    assert!(
+        noticed <= 10,
+        "reported lost only {noticed} updates after the kidnap"
+    );
+    let at = converged_from(&after, 0.25, 5.0).expect("never re-converged");
+    assert!(
+        at <= KIDNAP_RECOVERY_UPDATES,
+        "re-converged only after {at} updates"
+    );
+    assert!(!after.last().unwrap().lost, "still reports lost at the end");
+    assert!(after[after.len() - 10..]
+        .iter()
+        .all(|s| s.particles <= 2_000));
+}
+
+#[test]
 fn without_recovery_a_kidnapped_filter_stays_lost() {
     let config = AmclConfig {
         seed: 4,
+        relocalization_particles: 0,
         ..AmclConfig::default()
     };
     let after = kidnap_run(config);

@@ -18,21 +18,34 @@ pub enum BeamCombination {
     Product,
 }
 
+/// Which laser model weighs the particles.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LaserModel {
+    /// Endpoint distance to the nearest wall, one lookup per beam ([`super::ScanModel`]).
+    LikelihoodField,
+    /// Measured against ray-cast range, free space and no-returns count
+    /// ([`super::BeamScanModel`]; Nav2's `beam`).
+    Beam,
+}
+
 /// Configuration of the adaptive Monte Carlo localizer. Every field has Nav2's default except
 /// - the laser model: Nav2 defaults to `likelihood_field` (sum of cubes); here the default is
-///   the product (Nav2's `likelihood_field_prob`), which tracked 5x more precisely among
-///   unmapped obstacles (with the sum of cubes the filter diverged on tasks A and D). Beam
-///   skipping is off as in Nav2: with it, one seed of task C collapsed onto a wrong pose 11 m
-///   off (`eval amcl-accuracy --seed 1`);
+///   the ray-cast `beam` model with the product of the beams' likelihoods. Over tasks A–E at
+///   seeds 1–5 it tracks to 0.016 m mean error against 0.088 m for the likelihood field with
+///   the product (Nav2's `likelihood_field_prob`), which itself tracked 5x more precisely than
+///   the sum of cubes (docs/benchmarks.md). Beam skipping (likelihood field only) is off as in
+///   Nav2: with it, one seed of task C collapsed onto a wrong pose 11 m off;
 /// - the motion noise alphas, set to the Pioneer-class base's odometry (rotation from rotation
 ///   0.05, the rest 0.02) instead of Nav2's 0.2, which assumes a slipping base: too much
 ///   noise spreads the particles along corridors, where only door jambs pin the position;
 /// - the update thresholds, 0.05 m / 0.05 rad instead of 0.25 m / 0.2 rad: at 0.7 m/s the
 ///   estimate between updates is dead reckoning, and errors of a quarter metre built up.
 ///
-/// With these the simulated tasks A–E meet 0.10 m / 3° mean error (docs/benchmarks.md, "AMCL
-/// accuracy in the simulator"). See `amcl.example.toml` beside this file for a commented
-/// example.
+/// - lost-localization detection and global relocalization, which Nav2 leaves to the
+///   operator.
+///
+/// See `amcl.example.toml` beside this file for a commented example.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct AmclConfig {
@@ -60,6 +73,8 @@ pub struct AmclConfig {
     pub recovery_alpha_slow: f64,
     /// Decay rate of the fast average likelihood; 0 disables recovery.
     pub recovery_alpha_fast: f64,
+    /// The laser model; see [`LaserModel`].
+    pub laser_model: LaserModel,
     /// Distances to the nearest obstacle are clamped here in the likelihood field.
     pub laser_likelihood_max_dist_m: f64,
     /// Beams used per scan, spread evenly over the scan.
@@ -70,6 +85,13 @@ pub struct AmclConfig {
     pub z_rand: f64,
     /// Standard deviation of the hit component.
     pub sigma_hit_m: f64,
+    /// Beam model only: weight of the short-reading component (unmapped things in front of
+    /// the wall the map predicts).
+    pub z_short: f64,
+    /// Beam model only: weight of the no-return component.
+    pub z_max: f64,
+    /// Beam model only: decay rate of the short-reading component.
+    pub lambda_short_per_m: f64,
     /// How beams combine; see [`BeamCombination`].
     pub beam_combination: BeamCombination,
     /// Skip beams that most particles cannot explain (Nav2's `do_beamskip`): a beam whose
@@ -89,6 +111,34 @@ pub struct AmclConfig {
     pub resample_interval: u32,
     /// Pose of the laser in the robot frame (default: at the centre, looking forward).
     pub robot_from_laser: Pose2D,
+    /// Lost-localization check: a beam matches the map when its reading lies within this of
+    /// the range ray-cast from the estimate, and contradicts it when it is longer (through a
+    /// mapped wall, or no return where a wall is in range).
+    pub lost_fit_distance_m: f64,
+    /// A scan fits when at least this fraction of its matching and contradicting beams match
+    /// (shorter readings, from furniture and people in front of walls, are left out).
+    pub lost_fit_fraction: f64,
+    /// Localization counts as lost after this many filter updates in a row whose scan does not
+    /// fit, and as found again after as many that do (with the belief concentrated again).
+    pub lost_after_updates: u32,
+    /// When lost, this many particles are spread uniformly over the free space, beside the
+    /// current ones, and the particle cap is raised to it until the filter is found again
+    /// (global relocalization). 0: only report that localization is lost.
+    pub relocalization_particles: usize,
+    /// While relocalizing, this fraction of every resampling is drawn uniformly over the free
+    /// space (as Augmented MCL's recovery does), so that the true pose keeps a chance.
+    pub relocalization_random_fraction: f64,
+    /// Relocalization ends only after the odometry turned this much since it started (a full
+    /// turn sweeps the laser all round; the agent turns in place meanwhile)...
+    pub relocalization_sweep_rad: f64,
+    /// ...or travelled this far (a robot moved by other means, e.g. pushed or teleoperated).
+    pub relocalization_travel_m: f64,
+    /// ...and once the weighted particles' position standard deviation (√(σx² + σy²)) is
+    /// within this.
+    pub relocalized_position_std_m: f64,
+    /// While relocalizing, the beam model's log-likelihood is divided by this: a flatter
+    /// model, so that the true pose's neighbourhood survives among particles spread thin.
+    pub relocalization_temperature: f64,
 }
 
 impl Default for AmclConfig {
@@ -105,11 +155,15 @@ impl Default for AmclConfig {
             alpha4: 0.02,
             recovery_alpha_slow: 0.0,
             recovery_alpha_fast: 0.0,
+            laser_model: LaserModel::Beam,
             laser_likelihood_max_dist_m: 2.0,
             max_beams: 60,
             z_hit: 0.5,
             z_rand: 0.5,
             sigma_hit_m: 0.2,
+            z_short: 0.05,
+            z_max: 0.05,
+            lambda_short_per_m: 0.1,
             beam_combination: BeamCombination::Product,
             do_beamskip: false,
             beam_skip_distance_m: 0.5,
@@ -119,6 +173,15 @@ impl Default for AmclConfig {
             update_min_a_rad: 0.05,
             resample_interval: 1,
             robot_from_laser: Pose2D::new(0.0, 0.0, 0.0),
+            lost_fit_distance_m: 0.3,
+            lost_fit_fraction: 0.85,
+            lost_after_updates: 5,
+            relocalization_particles: 30_000,
+            relocalization_random_fraction: 0.05,
+            relocalization_sweep_rad: std::f64::consts::TAU,
+            relocalization_travel_m: 5.0,
+            relocalized_position_std_m: 0.25,
+            relocalization_temperature: 10.0,
         }
     }
 }
@@ -177,6 +240,9 @@ impl AmclConfig {
             ("alpha4", self.alpha4),
             ("z_hit", self.z_hit),
             ("z_rand", self.z_rand),
+            ("z_short", self.z_short),
+            ("z_max", self.z_max),
+            ("lambda_short_per_m", self.lambda_short_per_m),
             ("update_min_d_m", self.update_min_d_m),
             ("update_min_a_rad", self.update_min_a_rad),
         ] {
@@ -209,6 +275,15 @@ impl AmclConfig {
             ),
             ("sigma_hit_m", self.sigma_hit_m),
             ("beam_skip_distance_m", self.beam_skip_distance_m),
+            ("lost_fit_distance_m", self.lost_fit_distance_m),
+            (
+                "relocalized_position_std_m",
+                self.relocalized_position_std_m,
+            ),
+            (
+                "relocalization_temperature",
+                self.relocalization_temperature,
+            ),
         ] {
             if !(v.is_finite() && v > 0.0) {
                 return Err(bad(field, v, "must be a positive finite number"));
@@ -217,13 +292,47 @@ impl AmclConfig {
         for (field, v) in [
             ("beam_skip_threshold", self.beam_skip_threshold),
             ("beam_skip_error_threshold", self.beam_skip_error_threshold),
+            ("lost_fit_fraction", self.lost_fit_fraction),
+            (
+                "relocalization_random_fraction",
+                self.relocalization_random_fraction,
+            ),
         ] {
             if !(0.0..=1.0).contains(&v) {
                 return Err(bad(field, v, "must lie in [0, 1]"));
             }
         }
+        if self.do_beamskip && self.laser_model == LaserModel::Beam {
+            return Err(bad(
+                "do_beamskip",
+                self.do_beamskip,
+                "beam skipping applies to laser_model = \"likelihood_field\" only",
+            ));
+        }
         if self.max_beams < 2 {
             return Err(bad("max_beams", self.max_beams, "must be at least 2"));
+        }
+        for (field, v) in [
+            ("relocalization_sweep_rad", self.relocalization_sweep_rad),
+            ("relocalization_travel_m", self.relocalization_travel_m),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(bad(field, v, "must be a finite number >= 0"));
+            }
+        }
+        if self.lost_after_updates == 0 {
+            return Err(bad(
+                "lost_after_updates",
+                self.lost_after_updates,
+                "must be at least 1",
+            ));
+        }
+        if self.relocalization_particles > MAX_PARTICLES_LIMIT {
+            return Err(bad(
+                "relocalization_particles",
+                self.relocalization_particles,
+                "must be at most 1000000",
+            ));
         }
         if self.resample_interval == 0 {
             return Err(bad(

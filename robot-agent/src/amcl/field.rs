@@ -21,6 +21,10 @@ pub struct LikelihoodField {
     geometry: GridGeometry,
     max_dist_m: f64,
     quantized: Vec<u8>,
+    /// The same for the distance to the nearest occupied *or unknown* cell: where a ray cast
+    /// on the map stops (as Nav2's `map_calc_range` stops at any cell not known free; floor
+    /// plans often draw outer walls as unknown).
+    ray_quantized: Vec<u8>,
     free_cells: Vec<u32>,
 }
 
@@ -45,13 +49,16 @@ impl LikelihoodField {
                 reason: "more cells than AMCL indexes".into(),
             });
         }
-        let field = DistanceField::compute(grid, Sources::Occupied);
         let scale = f64::from(FIELD_LEVELS) / max_dist_m;
-        let quantized = field
-            .as_slice()
-            .iter()
-            .map(|&d| quantize(f64::from(d), max_dist_m, scale))
-            .collect();
+        let quantized_field = |sources| {
+            DistanceField::compute(grid, sources)
+                .as_slice()
+                .iter()
+                .map(|&d| quantize(f64::from(d), max_dist_m, scale))
+                .collect::<Vec<u8>>()
+        };
+        let quantized = quantized_field(Sources::Occupied);
+        let ray_quantized = quantized_field(Sources::OccupiedOrUnknown);
         #[allow(clippy::cast_possible_truncation)]
         let free_cells = grid
             .cells()
@@ -64,6 +71,7 @@ impl LikelihoodField {
             geometry: *grid.geometry(),
             max_dist_m,
             quantized,
+            ray_quantized,
             free_cells,
         })
     }
@@ -117,19 +125,41 @@ impl LikelihoodField {
     #[inline]
     #[must_use]
     pub fn level_at_grid(&self, gx: f64, gy: f64) -> u8 {
+        self.index_at_grid(gx, gy)
+            .map_or(FIELD_LEVELS, |i| self.quantized[i])
+    }
+
+    /// As [`Self::level_at_grid`] for the distance to the nearest occupied or unknown cell
+    /// (0: the point is in one, where a ray stops).
+    #[inline]
+    #[must_use]
+    pub fn ray_level_at_grid(&self, gx: f64, gy: f64) -> u8 {
+        self.index_at_grid(gx, gy)
+            .map_or(FIELD_LEVELS, |i| self.ray_quantized[i])
+    }
+
+    /// Clamped distance to the nearest occupied or unknown cell at a map-frame point.
+    #[must_use]
+    pub fn ray_distance_m(&self, x_m: f64, y_m: f64) -> f64 {
+        let (gx, gy) = self.world_to_grid(x_m, y_m);
+        f64::from(self.ray_level_at_grid(gx, gy)) * self.level_m()
+    }
+
+    #[inline]
+    fn index_at_grid(&self, gx: f64, gy: f64) -> Option<usize> {
         // Truncation equals floor for non-negative values and, unlike `floor`, compiles to one
         // instruction on baseline x86-64 (no SSE4.1); this is the innermost loop of AMCL.
         // NaN fails the comparison and lands off the map too.
         if !(gx >= 0.0 && gy >= 0.0) {
-            return FIELD_LEVELS;
+            return None;
         }
         #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
         let (ix, iy) = (gx as usize, gy as usize);
-        if ix >= self.geometry.width_cells() as usize || iy >= self.geometry.height_cells() as usize
-        {
-            return FIELD_LEVELS;
+        let w = self.geometry.width_cells() as usize;
+        if ix >= w || iy >= self.geometry.height_cells() as usize {
+            return None;
         }
-        self.quantized[iy * self.geometry.width_cells() as usize + ix]
+        Some(iy * w + ix)
     }
 
     /// Clamped distance to the nearest obstacle at a map-frame point, to the quantization step.

@@ -4,6 +4,7 @@
 //! - [`config`]: [`AmclConfig`], Nav2's parameters and defaults.
 //! - [`field`]: [`LikelihoodField`], the clamped, quantized distance field of a map.
 //! - [`sensor`]: the likelihood-field laser model, [`ScanModel`].
+//! - [`beam`]: the ray-cast beam model, [`BeamScanModel`].
 //! - [`motion`]: the four-alpha odometry motion model.
 //! - [`kld`]: the KLD-sampling bound and its pose histogram.
 //!
@@ -15,6 +16,7 @@
 //! `max(0, 1 - w_fast / w_slow)`, until the KLD bound for the bins occupied so far is met.
 //! All randomness comes from one `ChaCha8Rng` seeded from the configuration.
 
+pub mod beam;
 pub mod config;
 pub mod field;
 pub mod kld;
@@ -30,7 +32,8 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
-pub use config::{AmclConfig, BeamCombination};
+pub use beam::{BeamScanModel, RayCache};
+pub use config::{AmclConfig, BeamCombination, LaserModel};
 pub use field::LikelihoodField;
 pub use motion::{MotionNoise, OdometryDelta};
 pub use sensor::ScanModel;
@@ -85,6 +88,10 @@ pub struct UpdateOutcome {
     /// Random free-space particles drawn for recovery in this resampling.
     pub random_particles: usize,
     pub particle_count: usize,
+    /// Localization is lost (see [`Amcl::is_lost`]) after this update.
+    pub lost: bool,
+    /// This update found localization lost and spread particles to relocalize.
+    pub relocalization_started: bool,
 }
 
 /// The adaptive Monte Carlo localizer of one robot on one map.
@@ -99,6 +106,11 @@ pub struct Amcl {
     draws: Vec<u32>,
     /// Per particle and beam field levels, for beam skipping.
     levels: Vec<u8>,
+    /// Per particle pose in grid coordinates and weight factor, for the beam model.
+    grid_poses: Vec<[f64; 3]>,
+    factors: Vec<f64>,
+    /// Rays cast by the beam model on this filter's field, reused across updates.
+    rays: beam::RayCache,
     beams_skipped: usize,
     bins: kld::BinSet,
     /// Odometry pose at the last filter cycle; `None` until the first odometry after
@@ -112,6 +124,19 @@ pub struct Amcl {
     /// Summary of the weighted set before the last resampling (as Nav2 estimates): recovery
     /// particles drawn at resampling have not been weighed yet and must not move the estimate.
     weighted_estimate: Option<Estimate>,
+    /// Agreement of the last weighed scan with the map from the estimate.
+    scan_fit: Option<f64>,
+    /// Consecutive updates whose scan did not fit / did fit.
+    misfits_in_row: u32,
+    fits_in_row: u32,
+    /// Lost: too many misfits in a row, and not found again since.
+    lost: bool,
+    /// Particles were spread to relocalize, and the filter has not found itself since.
+    relocalizing: bool,
+    /// Odometry rotation since relocalization started.
+    relocalization_turned_rad: f64,
+    /// Odometry distance since relocalization started.
+    relocalization_travelled_m: f64,
 }
 
 impl Amcl {
@@ -147,6 +172,9 @@ impl Amcl {
             scratch: Vec::with_capacity(config.max_particles),
             draws: Vec::with_capacity(config.max_particles),
             levels: Vec::new(),
+            grid_poses: Vec::new(),
+            factors: Vec::new(),
+            rays: beam::RayCache::default(),
             beams_skipped: 0,
             bins: kld::BinSet::default(),
             odom_at_update: None,
@@ -155,6 +183,13 @@ impl Amcl {
             w_slow: 0.0,
             w_fast: 0.0,
             weighted_estimate: None,
+            scan_fit: None,
+            misfits_in_row: 0,
+            fits_in_row: 0,
+            lost: false,
+            relocalizing: false,
+            relocalization_turned_rad: 0.0,
+            relocalization_travelled_m: 0.0,
             config,
         })
     }
@@ -244,10 +279,39 @@ impl Amcl {
             }
         }
         self.reset_after_init();
+        // Not knowing where it is, the filter searches as after losing itself.
+        self.start_relocalizing();
         Ok(())
     }
 
+    /// Whether localization is lost: the last `lost_after_updates` scans did not fit the map
+    /// from the estimate, and since then the filter has not concentrated on a pose where they
+    /// fit (an operator's initial pose or global localization also ends it).
+    #[must_use]
+    pub fn is_lost(&self) -> bool {
+        self.lost
+    }
+
+    /// Whether particles are spread over the map to find the robot again.
+    #[must_use]
+    pub fn is_relocalizing(&self) -> bool {
+        self.relocalizing
+    }
+
+    /// How well the last weighed scan agrees with the map from the estimate
+    /// ([`BeamScanModel::agreement`] within `lost_fit_distance_m`; `None` before a scan that
+    /// says anything either way).
+    #[must_use]
+    pub fn scan_fit(&self) -> Option<f64> {
+        self.scan_fit
+    }
+
     fn reset_after_init(&mut self) {
+        self.scan_fit = None;
+        self.misfits_in_row = 0;
+        self.fits_in_row = 0;
+        self.lost = false;
+        self.relocalizing = false;
         // The new belief is about "now": motion accumulated before it must not be applied.
         self.odom_at_update = None;
         self.force_update = true;
@@ -305,6 +369,12 @@ impl Amcl {
                 if !(moved || forced) {
                     return Ok(outcome);
                 }
+                if self.relocalizing {
+                    self.relocalization_turned_rad +=
+                        normalize_angle(now.yaw_rad - before.yaw_rad).abs();
+                    self.relocalization_travelled_m +=
+                        (now.x_m - before.x_m).hypot(now.y_m - before.y_m);
+                }
                 let delta = OdometryDelta::between(&before, &now, &self.noise);
                 for p in &mut self.particles {
                     delta.sample(&mut p.pose, &mut self.rng);
@@ -320,6 +390,7 @@ impl Amcl {
         self.weigh(scan);
         self.weighted_estimate = summarize(&self.particles);
         self.force_update = false;
+        let relocalize = self.check_fit(scan);
         outcome.filter_ran = true;
         outcome.laser_applied = true;
         outcome.beams_skipped = self.beams_skipped;
@@ -329,31 +400,125 @@ impl Amcl {
             outcome.random_particles = self.resample();
             outcome.resampled = true;
         }
+        if relocalize {
+            self.spread_for_relocalization();
+            outcome.relocalization_started = true;
+        }
         outcome.particle_count = self.particles.len();
+        outcome.lost = self.lost;
         Ok(outcome)
+    }
+
+    /// Scores the scan against the map from the new estimate and updates the lost state;
+    /// returns whether particles should be spread to relocalize now.
+    fn check_fit(&mut self, scan: &LaserScan) -> bool {
+        let Some(estimate) = self.weighted_estimate else {
+            return false;
+        };
+        let field = Arc::clone(&self.field);
+        let model = BeamScanModel::new(&field, &self.config, scan, &mut self.rays);
+        let Some(fit) = model.agreement(&estimate.pose, self.config.lost_fit_distance_m) else {
+            // Nothing within range: the scan says nothing either way.
+            return false;
+        };
+        self.scan_fit = Some(fit);
+        if fit < self.config.lost_fit_fraction {
+            self.misfits_in_row += 1;
+            self.fits_in_row = 0;
+        } else {
+            self.fits_in_row += 1;
+            self.misfits_in_row = 0;
+        }
+        let n = self.config.lost_after_updates;
+        if !self.lost && self.misfits_in_row >= n {
+            self.lost = true;
+            return self.config.relocalization_particles > 0;
+        }
+        // Found again once the scans fit from one concentrated hypothesis, and (when
+        // relocalizing) the laser has swept all round: repetitive buildings have look-alike
+        // places that only a view in some direction tells apart.
+        let concentrated = (estimate.covariance[0] + estimate.covariance[4]).sqrt()
+            <= self.config.relocalized_position_std_m;
+        let swept = !self.relocalizing
+            || self.relocalization_turned_rad >= self.config.relocalization_sweep_rad
+            || self.relocalization_travelled_m >= self.config.relocalization_travel_m;
+        if self.lost && self.fits_in_row >= n && concentrated && swept {
+            self.lost = false;
+            self.relocalizing = false;
+        }
+        false
+    }
+
+    /// Adds `relocalization_particles` poses drawn uniformly over the free space to the
+    /// current ones, all weighted alike: if the belief was right after all, its particles
+    /// win the next weighing; if not, the spread ones hold the true pose somewhere.
+    fn spread_for_relocalization(&mut self) {
+        for _ in 0..self.config.relocalization_particles {
+            if let Some(pose) = random_free_pose(&self.field, &mut self.rng) {
+                self.particles.push(Particle { pose, weight: 0.0 });
+            }
+        }
+        #[allow(clippy::cast_precision_loss)]
+        let w = 1.0 / self.particles.len() as f64;
+        for p in &mut self.particles {
+            p.weight = w;
+        }
+        self.start_relocalizing();
+    }
+
+    /// Lost and searching: a flatter model, random particles at every resampling and a raised
+    /// particle cap until the filter has concentrated again after a sweep or some travel.
+    fn start_relocalizing(&mut self) {
+        self.lost = true;
+        self.relocalizing = true;
+        self.relocalization_turned_rad = 0.0;
+        self.relocalization_travelled_m = 0.0;
+        self.fits_in_row = 0;
     }
 
     /// Multiplies every weight by the scan likelihood, normalizes, and updates the averages.
     fn weigh(&mut self, scan: &LaserScan) {
         let field = Arc::clone(&self.field);
-        let model = ScanModel::new(&field, &self.config, scan);
         self.beams_skipped = 0;
-        if model.beam_count() == 0 {
-            // No return at all (open space beyond range): the scan says nothing.
-            return;
-        }
-        let total = if self.config.do_beamskip {
-            self.weigh_with_beam_skipping(&model)
-        } else {
-            let origin_yaw = self.field.origin().yaw_rad;
-            let mut total = 0.0;
-            for p in &mut self.particles {
-                let (gx, gy) = self.field.world_to_grid(p.pose.x_m, p.pose.y_m);
-                let (s, c) = (p.pose.yaw_rad - origin_yaw).sin_cos();
-                p.weight *= model.likelihood_in_grid(gx, gy, c, s);
-                total += p.weight;
+        let origin_yaw = field.origin().yaw_rad;
+        let total = match self.config.laser_model {
+            LaserModel::LikelihoodField => {
+                let model = ScanModel::new(&field, &self.config, scan);
+                if model.beam_count() == 0 {
+                    // No return at all (open space beyond range): the scan says nothing.
+                    return;
+                }
+                if self.config.do_beamskip {
+                    self.weigh_with_beam_skipping(&model)
+                } else {
+                    self.weigh_each(|gx, gy, c, s| model.likelihood_in_grid(gx, gy, c, s))
+                }
             }
-            total
+            LaserModel::Beam => {
+                let temperature = if self.relocalizing {
+                    self.config.relocalization_temperature
+                } else {
+                    1.0
+                };
+                let mut model = BeamScanModel::new(&field, &self.config, scan, &mut self.rays)
+                    .with_temperature(temperature);
+                if model.beam_count() == 0 {
+                    return;
+                }
+                self.grid_poses.clear();
+                self.grid_poses.extend(self.particles.iter().map(|p| {
+                    let (gx, gy) = field.world_to_grid(p.pose.x_m, p.pose.y_m);
+                    [gx, gy, p.pose.yaw_rad - origin_yaw]
+                }));
+                self.factors.resize(self.particles.len(), 0.0);
+                model.likelihoods_in_grid(&self.grid_poses, &mut self.factors);
+                let mut total = 0.0;
+                for (p, f) in self.particles.iter_mut().zip(&self.factors) {
+                    p.weight *= f;
+                    total += p.weight;
+                }
+                total
+            }
         };
         if !(total.is_finite() && total > 0.0) {
             // Every hypothesis is impossible (or the product underflowed): forget the weights
@@ -380,6 +545,20 @@ impl Amcl {
         for p in &mut self.particles {
             p.weight /= total;
         }
+    }
+
+    /// Multiplies every weight by `likelihood(gx, gy, cos, sin)` of its pose in grid
+    /// coordinates; returns the weight sum.
+    fn weigh_each(&mut self, likelihood: impl Fn(f64, f64, f64, f64) -> f64) -> f64 {
+        let origin_yaw = self.field.origin().yaw_rad;
+        let mut total = 0.0;
+        for p in &mut self.particles {
+            let (gx, gy) = self.field.world_to_grid(p.pose.x_m, p.pose.y_m);
+            let (s, c) = (p.pose.yaw_rad - origin_yaw).sin_cos();
+            p.weight *= likelihood(gx, gy, c, s);
+            total += p.weight;
+        }
+        total
     }
 
     /// Beam skipping (Nav2's `likelihood_field_prob`): a first pass records every particle's
@@ -433,14 +612,25 @@ impl Amcl {
     /// Low-variance resampling with KLD-adaptive size and random recovery particles. Returns
     /// the number of random particles drawn.
     fn resample(&mut self) -> usize {
-        let max = self.config.max_particles;
+        let max = if self.relocalizing {
+            self.config
+                .relocalization_particles
+                .max(self.config.max_particles)
+        } else {
+            self.config.max_particles
+        };
         let recovery_on =
             self.config.recovery_alpha_slow > 0.0 && self.config.recovery_alpha_fast > 0.0;
-        let w_diff = if recovery_on && self.w_slow > 0.0 {
+        let mut w_diff = if recovery_on && self.w_slow > 0.0 {
             (1.0 - self.w_fast / self.w_slow).max(0.0)
         } else {
             0.0
         };
+        if self.relocalizing {
+            // Keep seeding the whole map while relocalizing: one unlucky scan (a person next
+            // to the true pose) must not wipe out the true hypothesis for good.
+            w_diff = w_diff.max(self.config.relocalization_random_fraction);
+        }
 
         // A low-variance (systematic) draw of `max` candidates: one random offset, then a comb
         // with spacing 1/max over the cumulative weights.
@@ -481,11 +671,19 @@ impl Amcl {
             };
             self.scratch.push(Particle { pose, weight: 1.0 });
             self.bins.insert(kld::bin_key(&pose));
+            // While relocalizing the count stays at the cap: KLD would shrink the set to the
+            // few poses the first scans favour, and with them the chance that random draws
+            // near the true pose survive.
+            let min = if self.relocalizing {
+                max
+            } else {
+                self.config.min_particles
+            };
             let limit = kld::sample_bound(
                 self.bins.len(),
                 self.config.pf_err,
                 self.config.pf_z,
-                self.config.min_particles,
+                min,
                 max,
             );
             if self.scratch.len() >= limit {

@@ -27,7 +27,7 @@ pub struct ScanModel<'a> {
 }
 
 /// Indices of `max_beams` beams spread evenly over `n` (all of them if `n <= max_beams`).
-fn beam_indices(n: usize, max_beams: usize) -> impl Iterator<Item = usize> {
+pub(crate) fn beam_indices(n: usize, max_beams: usize) -> impl Iterator<Item = usize> {
     let used = n.min(max_beams);
     (0..used).map(move |k| {
         if used <= 1 {
