@@ -146,6 +146,28 @@ impl<'a> BeamScanModel<'a> {
         scan: &LaserScan,
         cache: &'a mut RayCache,
     ) -> Self {
+        Self::build(field, config, scan, cache, true)
+    }
+
+    /// The model without its likelihood tables, for [`Self::agreement`] only (it weighs every
+    /// pose alike): the lost-localization check runs every update and needs no logarithms.
+    #[must_use]
+    pub fn for_agreement(
+        field: &'a LikelihoodField,
+        config: &AmclConfig,
+        scan: &LaserScan,
+        cache: &'a mut RayCache,
+    ) -> Self {
+        Self::build(field, config, scan, cache, false)
+    }
+
+    fn build(
+        field: &'a LikelihoodField,
+        config: &AmclConfig,
+        scan: &LaserScan,
+        cache: &'a mut RayCache,
+        tables: bool,
+    ) -> Self {
         let resolution_m = field.resolution_m();
         let range_max_m = f64::from(scan.range_max_m);
         let sigma = config.sigma_hit_m;
@@ -156,6 +178,17 @@ impl<'a> BeamScanModel<'a> {
             BeamCombination::SumOfCubes => p * p * p,
             BeamCombination::Product => p.ln(),
         };
+        #[allow(clippy::cast_precision_loss)]
+        let hits: Vec<f64> = (0..len)
+            .map(|k| {
+                let d = k as f64 / TABLE_PER_M;
+                if k + 1 == len {
+                    0.0
+                } else {
+                    config.z_hit * (-(d * d) / (2.0 * sigma * sigma)).exp()
+                }
+            })
+            .collect();
         let mut beams = Vec::new();
         let mut terms = Vec::new();
         for i in super::sensor::beam_indices(scan.ranges_m.len(), config.max_beams) {
@@ -174,16 +207,9 @@ impl<'a> BeamScanModel<'a> {
                 )
             };
             let row = terms.len();
-            for extra in [short, 0.0] {
-                for k in 0..len {
-                    #[allow(clippy::cast_precision_loss)]
-                    let d = k as f64 / TABLE_PER_M;
-                    let hit = if k + 1 == len {
-                        0.0
-                    } else {
-                        config.z_hit * (-(d * d) / (2.0 * sigma * sigma)).exp()
-                    };
-                    terms.push(combine(hit + base + extra));
+            if tables {
+                for extra in [short, 0.0] {
+                    terms.extend(hits.iter().map(|hit| combine(hit + base + extra)));
                 }
             }
             beams.push(Beam {
@@ -246,6 +272,11 @@ impl<'a> BeamScanModel<'a> {
     /// Beams are the outer loop so that the rays of one beam, shared among the particles,
     /// stay in a cache small enough for L1.
     pub fn likelihoods_in_grid(&mut self, poses: &[[f64; 3]], out: &mut [f64]) {
+        if self.terms.is_empty() {
+            // A model for agreement only says nothing about the particles.
+            out.fill(1.0);
+            return;
+        }
         #[allow(clippy::cast_precision_loss)]
         let bins_per_rad = DIRECTION_BINS as f64 / TAU;
         let mut lasers = std::mem::take(&mut self.lasers);

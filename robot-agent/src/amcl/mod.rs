@@ -416,7 +416,7 @@ impl Amcl {
             return false;
         };
         let field = Arc::clone(&self.field);
-        let model = BeamScanModel::new(&field, &self.config, scan, &mut self.rays);
+        let model = BeamScanModel::for_agreement(&field, &self.config, scan, &mut self.rays);
         let Some(fit) = model.agreement(&estimate.pose, self.config.lost_fit_distance_m) else {
             // Nothing within range: the scan says nothing either way.
             return false;
