@@ -239,13 +239,14 @@ impl<'a> BeamScanModel<'a> {
         }
     }
 
-    /// Flattens the model: every weight factor `L` becomes `L^(1/temperature)`. Sixty beams
+    /// Flattens the model: every weight factor `L` becomes `L^(1/temperature)` (`temperature`
+    /// ≥ 1; 1 leaves it as is). Sixty beams
     /// multiplied make a likelihood so peaked that, among particles spread over a whole map,
     /// the few near the true pose are rarely near enough to win; a flatter model lets the
     /// neighbourhood of the truth survive until the filter concentrates there.
     #[must_use]
     pub fn with_temperature(mut self, temperature: f64) -> Self {
-        self.temperature = temperature.max(1.0);
+        self.temperature = temperature;
         self
     }
 

@@ -280,10 +280,6 @@ impl AmclConfig {
                 "relocalized_position_std_m",
                 self.relocalized_position_std_m,
             ),
-            (
-                "relocalization_temperature",
-                self.relocalization_temperature,
-            ),
         ] {
             if !(v.is_finite() && v > 0.0) {
                 return Err(bad(field, v, "must be a positive finite number"));
@@ -311,6 +307,14 @@ impl AmclConfig {
         }
         if self.max_beams < 2 {
             return Err(bad("max_beams", self.max_beams, "must be at least 2"));
+        }
+        if !(self.relocalization_temperature.is_finite() && self.relocalization_temperature >= 1.0)
+        {
+            return Err(bad(
+                "relocalization_temperature",
+                self.relocalization_temperature,
+                "must be a finite number >= 1",
+            ));
         }
         for (field, v) in [
             ("relocalization_sweep_rad", self.relocalization_sweep_rad),
@@ -389,6 +393,13 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("recovery_alpha_fast"), "{e}");
+        let e = AmclConfig::from_toml("relocalization_temperature = 0.5")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("relocalization_temperature") && e.contains("0.5"),
+            "{e}"
+        );
         let e = AmclConfig::from_toml("sigma_hit = 0.2")
             .unwrap_err()
             .to_string();

@@ -90,8 +90,6 @@ pub struct UpdateOutcome {
     pub particle_count: usize,
     /// Localization is lost (see [`Amcl::is_lost`]) after this update.
     pub lost: bool,
-    /// This update found localization lost and spread particles to relocalize.
-    pub relocalization_started: bool,
 }
 
 /// The adaptive Monte Carlo localizer of one robot on one map.
@@ -124,8 +122,6 @@ pub struct Amcl {
     /// Summary of the weighted set before the last resampling (as Nav2 estimates): recovery
     /// particles drawn at resampling have not been weighed yet and must not move the estimate.
     weighted_estimate: Option<Estimate>,
-    /// Agreement of the last weighed scan with the map from the estimate.
-    scan_fit: Option<f64>,
     /// Consecutive updates whose scan did not fit / did fit.
     misfits_in_row: u32,
     fits_in_row: u32,
@@ -183,7 +179,6 @@ impl Amcl {
             w_slow: 0.0,
             w_fast: 0.0,
             weighted_estimate: None,
-            scan_fit: None,
             misfits_in_row: 0,
             fits_in_row: 0,
             lost: false,
@@ -298,16 +293,7 @@ impl Amcl {
         self.relocalizing
     }
 
-    /// How well the last weighed scan agrees with the map from the estimate
-    /// ([`BeamScanModel::agreement`] within `lost_fit_distance_m`; `None` before a scan that
-    /// says anything either way).
-    #[must_use]
-    pub fn scan_fit(&self) -> Option<f64> {
-        self.scan_fit
-    }
-
     fn reset_after_init(&mut self) {
-        self.scan_fit = None;
         self.misfits_in_row = 0;
         self.fits_in_row = 0;
         self.lost = false;
@@ -402,7 +388,6 @@ impl Amcl {
         }
         if relocalize {
             self.spread_for_relocalization();
-            outcome.relocalization_started = true;
         }
         outcome.particle_count = self.particles.len();
         outcome.lost = self.lost;
@@ -421,7 +406,6 @@ impl Amcl {
             // Nothing within range: the scan says nothing either way.
             return false;
         };
-        self.scan_fit = Some(fit);
         if fit < self.config.lost_fit_fraction {
             self.misfits_in_row += 1;
             self.fits_in_row = 0;
