@@ -13,8 +13,9 @@
 //! Figure 5 in closed loop (see [`crate::table`]).
 //!
 //! `eval record [--scenario FILE]... [--samples N] [--noise P] [--noise-peak-radps W] [--policy MODEL --beta B]
-//! [--seed S] [--jobs N] [--image-px PX] [--every K] [--episode-s S] --out DIR`: the expert's demonstrations on the
-//! training scenarios as an imitation-learning dataset (see [`crate::record`]).
+//! [--seed S] [--jobs N] [--image-px PX] [--every K] [--episode-s S] [--record-dir DIR] --out DIR`: the expert's
+//! demonstrations on the training scenarios as an imitation-learning dataset (see
+//! [`crate::record`]); `--record-dir` also writes each episode's run log.
 
 use std::path::PathBuf;
 
@@ -255,6 +256,13 @@ pub struct RecordArgs {
     /// ./scenarios or the user data directory).
     #[arg(long)]
     scenarios: Option<PathBuf>,
+    /// Also write one run log per episode here (MCAP, docs/logs.md):
+    /// `episode<NNNNN>-<scenario>-expert-seed<seed>.mcap`, NNNNN the samples' `episode`.
+    #[arg(long)]
+    record_dir: Option<PathBuf>,
+    /// Also record the camera (JPEG) in the run logs.
+    #[arg(long, requires = "record_dir")]
+    record_camera: bool,
     /// Output folder: index.json and shard_NNNNN/*.npy (training/DATASET.md).
     #[arg(long)]
     out: PathBuf,
@@ -289,6 +297,7 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
             .transpose()?,
         run: TableOptions {
             agent: read_agent_config(args.config.as_deref())?,
+            record: record_settings(args.record_dir.as_deref(), args.record_camera),
             ..TableOptions::default()
         },
         command: std::env::args().collect::<Vec<_>>().join(" "),

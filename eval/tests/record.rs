@@ -393,3 +393,62 @@ fn generated_buildings_record_and_evaluation_seeds_are_refused() {
     assert!(err.to_string().contains("1000003"), "{err}");
     assert!(std::fs::read_dir(refused.path()).unwrap().next().is_none());
 }
+
+/// `eval record --record-dir`: every stored episode also leaves its run log, named after the
+/// samples' episode number, which replays through the agent's AMCL exactly as it ran; the
+/// dataset is the same as without logs.
+#[test]
+fn the_command_line_records_a_run_log_per_episode() {
+    let (out, logs) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let train_lab = scenario("train_lab.yaml");
+    let status = Command::new(env!("CARGO_BIN_EXE_eval"))
+        .args(["record", "--samples", "200", "--noise", "0", "--seed", "3"])
+        .args(["--jobs", "2", "--image-px", "32", "--episode-s", "12"])
+        .args(["--shard-samples", "128", "--scenario"])
+        .arg(&train_lab)
+        .arg("--record-dir")
+        .arg(logs.path())
+        .arg("--out")
+        .arg(out.path())
+        .status()
+        .unwrap();
+    assert!(status.success());
+
+    let (_, fields) = read_all(out.path());
+    let mut episodes: Vec<u32> = fields["episode"]
+        .chunks_exact(4)
+        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect();
+    episodes.dedup();
+    assert!(episodes.len() >= 2, "episodes {episodes:?}");
+    let names: Vec<String> = std::fs::read_dir(logs.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    for episode in &episodes {
+        let prefix = format!("episode{episode:05}-train_lab-expert-seed");
+        let name = names
+            .iter()
+            .find(|n| n.starts_with(&prefix) && n.ends_with(".mcap"))
+            .unwrap_or_else(|| panic!("no log {prefix}*.mcap in {names:?}"));
+        let log = fleet_log::RunLog::open(&logs.path().join(name)).unwrap();
+        let summary = log.run_summary().unwrap();
+        assert_eq!(summary.method, "expert");
+        assert!(!log.ground_truth().is_empty());
+        let config = robot_agent::replay::recorded_config(&log).unwrap();
+        let plan = PathBuf::from(log.map().unwrap().path.clone().unwrap());
+        assert_eq!(plan.file_name().unwrap(), "lab.yaml");
+        let grid = map_core::ros::load_ros_map(&plan, &map_core::ImportLimits::default())
+            .unwrap()
+            .grid;
+        let replayed = robot_agent::replay::replay(&log, &grid, &config).unwrap();
+        assert_eq!(replayed.summary.max_live_difference_m, Some(0.0), "{name}");
+    }
+
+    // The logs change nothing in the dataset.
+    let plain = tempfile::tempdir().unwrap();
+    let mut o = options(0.0, 2);
+    o.samples = 200;
+    record(&o, plain.path(), &|_| {}).unwrap();
+    assert_eq!(read_all(plain.path()).1, fields);
+}

@@ -14,6 +14,7 @@ use anyhow::Context;
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use map_store::{load_ros_map, ImportLimits};
+use protocol::shutdown::StopSignal;
 use protocol::{Pose2D, SessionArgs, SiteId};
 
 use crate::bench::{markdown_table, run_bench, BenchOptions};
@@ -122,6 +123,11 @@ pub struct DemoArgs {
     /// (certificates made once in <data-dir>/zenoh-site; see docs/deploy.md).
     #[arg(long)]
     pub secure: bool,
+    /// Record the run as MCAP logs in this folder (docs/logs.md): `<robot id>.mcap` per agent
+    /// (`<robot id>-restart<N>.mcap` after a restart) and `sim.mcap` (the first robot's ground
+    /// truth), each finished when the demo stops.
+    #[arg(long)]
+    pub record_dir: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]
@@ -333,6 +339,7 @@ fn demo(args: DemoArgs, out: &mut dyn Write) -> anyhow::Result<()> {
         bin_dir: None,
         models_dir: args.models_dir,
         secure: args.secure,
+        record_dir: args.record_dir,
     };
     runtime()?.block_on(crate::demo::run(opts, out))
 }
@@ -389,7 +396,7 @@ fn serve(args: &ServeArgs, out: &mut dyn Write) -> anyhow::Result<()> {
         .context("cannot start the tokio runtime")?;
     runtime.block_on(async {
         // Listen for SIGTERM before saying we listen: a supervisor may stop us at once.
-        let stop = StopSignal::install()?;
+        let stop = StopSignal::install().context("cannot listen for SIGTERM")?;
         let server = Server::start(opts).await?;
         writeln!(out, "listening on {}", server.url())?;
         match server.token_source() {
@@ -408,7 +415,7 @@ fn serve(args: &ServeArgs, out: &mut dyn Write) -> anyhow::Result<()> {
         }
         writeln!(out, "zenoh: {}", server.zenoh_locators().await.join(" "))?;
         out.flush()?;
-        stop.wait().await?;
+        stop.wait().await.context("cannot listen for Ctrl-C")?;
         writeln!(out, "stopping")?;
         out.flush()?;
         server.stop().await?;
@@ -418,40 +425,11 @@ fn serve(args: &ServeArgs, out: &mut dyn Write) -> anyhow::Result<()> {
 
 /// Ctrl-C, or SIGTERM on Unix (what `kill` and process supervisors send).
 pub(crate) async fn wait_for_stop_signal() -> anyhow::Result<()> {
-    StopSignal::install()?.wait().await
-}
-
-/// A stop request (Ctrl-C or SIGTERM) listened for from [`StopSignal::install`] on, so a
-/// signal that arrives before anyone waits is not lost (nor kills the process).
-pub(crate) struct StopSignal {
-    #[cfg(unix)]
-    term: tokio::signal::unix::Signal,
-}
-
-impl StopSignal {
-    pub(crate) fn install() -> anyhow::Result<Self> {
-        Ok(Self {
-            #[cfg(unix)]
-            term: tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
-                .context("cannot listen for SIGTERM")?,
-        })
-    }
-
-    pub(crate) async fn wait(self) -> anyhow::Result<()> {
-        #[cfg(unix)]
-        {
-            let mut term = self.term;
-            tokio::select! {
-                r = tokio::signal::ctrl_c() => r.context("cannot listen for Ctrl-C")?,
-                _ = term.recv() => {}
-            }
-        }
-        #[cfg(not(unix))]
-        tokio::signal::ctrl_c()
-            .await
-            .context("cannot listen for Ctrl-C")?;
-        Ok(())
-    }
+    StopSignal::install()
+        .context("cannot listen for SIGTERM")?
+        .wait()
+        .await
+        .context("cannot listen for Ctrl-C")
 }
 
 fn plan(args: &PlanArgs, out: &mut dyn Write) -> anyhow::Result<()> {

@@ -49,6 +49,9 @@ pub struct DemoOptions {
     /// Zenoh mutual TLS and access control between the service, the simulator and the agents,
     /// with the site's certificates made (or reused) in `<data_dir>/zenoh-site`.
     pub secure: bool,
+    /// Record the run: one log per agent and one of the simulator in this folder
+    /// ([`RobotsSpec::record_dir`]).
+    pub record_dir: Option<PathBuf>,
 }
 
 /// Imports `first` and then every ROS floor plan (`*.yaml`) in `dirs`, each named after its
@@ -199,6 +202,7 @@ impl Demo {
             models_dir: opts.models_dir.clone(),
             roster_timeout: Duration::from_secs(60),
             security,
+            record_dir: opts.record_dir.clone(),
         };
         match tokio::task::spawn_blocking(move || Robots::start(&spec)).await {
             Ok(Ok(robots)) => {

@@ -299,6 +299,11 @@ pub struct RobotsSpec {
     /// The site's certificates and access-control rules (`planner-service certs`): each child
     /// gets its own identity's certificate; `None`: plain TCP.
     pub security: Option<SiteFiles>,
+    /// Folder of run logs (MCAP, docs/logs.md): each agent records `<robot id>.mcap`
+    /// (`<robot id>-restart<N>.mcap` after its N-th restart, so a restart keeps the log of the
+    /// run before it) and the simulator `sim.mcap` (the first robot's ground truth). `None`:
+    /// nothing is recorded.
+    pub record_dir: Option<PathBuf>,
 }
 
 impl RobotsSpec {
@@ -323,6 +328,7 @@ impl RobotsSpec {
             models_dir: None,
             roster_timeout: Duration::from_secs(60),
             security: None,
+            record_dir: None,
         }
     }
 
@@ -395,6 +401,8 @@ pub struct Robots {
     spec: RobotsSpec,
     agent_bin: PathBuf,
     models: Vec<(ControllerKind, PathBuf)>,
+    /// Starts of each agent so far (its log's name counts them).
+    starts: Vec<u32>,
 }
 
 impl Robots {
@@ -427,6 +435,9 @@ impl Robots {
         for e in &spec.connect {
             cmd.arg("--connect").arg(e);
         }
+        if let Some(dir) = &spec.record_dir {
+            cmd.arg("--record").arg(dir.join("sim.mcap"));
+        }
         spec.secure(&mut cmd, &Identity::Sim);
         let mut sim = Process::spawn("sim", cmd)?;
         let roster = read_roster(&mut sim, spec.roster_timeout)?;
@@ -445,6 +456,7 @@ impl Robots {
             spec: spec.clone(),
             agent_bin,
             models,
+            starts: vec![0; spec.robots],
         };
         for i in 0..robots.roster.robots.len() {
             let pose = robots.roster.robots[i].pose();
@@ -455,7 +467,9 @@ impl Robots {
     }
 
     /// Starts the agent of the `index`-th robot of the roster, localizing from `pose`.
-    fn spawn_agent(&self, index: usize, pose: Pose2D) -> Result<Process, LaunchError> {
+    fn spawn_agent(&mut self, index: usize, pose: Pose2D) -> Result<Process, LaunchError> {
+        let restarts = self.starts[index];
+        self.starts[index] += 1;
         let robot = &self.roster.robots[index];
         let controller = self.spec.controller(index);
         let model = self
@@ -470,6 +484,7 @@ impl Robots {
             pose,
             controller,
             model,
+            restarts,
         );
         let mut agent = Process::spawn(&format!("agent {}", robot.id), cmd)?;
         agent.stop_collecting();
@@ -544,6 +559,7 @@ fn read_roster(sim: &mut Process, timeout: Duration) -> Result<Roster, LaunchErr
     }
 }
 
+/// The command of a robot's agent, started for the first time when `restarts` is 0.
 fn agent_command(
     bin: &Path,
     spec: &RobotsSpec,
@@ -551,6 +567,7 @@ fn agent_command(
     pose: Pose2D,
     controller: ControllerKind,
     model: Option<&Path>,
+    restarts: u32,
 ) -> Command {
     let mut cmd = Command::new(bin);
     cmd.arg("--robot-id")
@@ -570,6 +587,14 @@ fn agent_command(
     }
     for e in &spec.connect {
         cmd.arg("--connect").arg(e);
+    }
+    if let Some(dir) = &spec.record_dir {
+        let name = if restarts == 0 {
+            format!("{}.mcap", id.as_str())
+        } else {
+            format!("{}-restart{restarts}.mcap", id.as_str())
+        };
+        cmd.arg("--record").arg(dir.join(name));
     }
     spec.secure(&mut cmd, &Identity::Agent(id.clone()));
     cmd
@@ -681,6 +706,7 @@ mod tests {
             pose,
             ControllerKind::Lpe,
             Some(Path::new("/m/lpe.onnx")),
+            0,
         );
         let args = args_of(&cmd);
         let at = |flag: &str| flag_value(&args, flag);
@@ -707,6 +733,7 @@ mod tests {
             pose,
             ControllerKind::Lpe,
             None,
+            0,
         );
         let args = args_of(&cmd);
         let at = |flag: &str| flag_value(&args, flag);
@@ -714,6 +741,25 @@ mod tests {
         assert_eq!(at("--zenoh-tls-key"), "/site/agent.robot_2.key");
         assert_eq!(at("--zenoh-tls-ca"), "/site/ca.pem");
         assert_eq!(at("--zenoh-acl"), "/site/acl.json5");
+        assert!(!args.iter().any(|a| a == "--record"));
+
+        // Recording: one log per start of the agent, a restart does not overwrite the last.
+        let mut recording = s.clone();
+        recording.record_dir = Some(PathBuf::from("/logs"));
+        let log = |restarts| {
+            let cmd = agent_command(
+                Path::new("robot-agent"),
+                &recording,
+                &RobotId::new("robot_2").unwrap(),
+                pose,
+                ControllerKind::DynamicWindow,
+                None,
+                restarts,
+            );
+            flag_value(&args_of(&cmd), "--record")
+        };
+        assert_eq!(log(0), "/logs/robot_2.mcap");
+        assert_eq!(log(2), "/logs/robot_2-restart2.mcap");
     }
 
     #[test]

@@ -75,6 +75,7 @@ pub mod keys;
 pub mod lpe;
 pub mod messages;
 pub mod security;
+pub mod shutdown;
 #[cfg(feature = "cli")]
 pub mod telemetry;
 pub mod zenoh_io;

@@ -222,12 +222,9 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
         .build()
         .context("cannot start the tokio runtime")?;
     runtime.block_on(async move {
-        let shutdown = async {
-            if let Err(e) = tokio::signal::ctrl_c().await {
-                tracing::error!("cannot listen for Ctrl-C ({e}); stopping");
-            }
-        };
-        node::run(options, shutdown).await
+        // Ctrl-C or SIGTERM (the demo, systemd, a container runtime): the agent stops the
+        // base and finishes its run log.
+        node::run(options, protocol::shutdown::stop_requested()).await
     })?;
     Ok(())
 }

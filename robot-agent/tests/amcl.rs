@@ -9,14 +9,17 @@ mod amcl_world;
 use std::sync::Arc;
 
 use amcl_world::{depot_world, drive, sandbox_world, Laser, OdometrySim};
+use fleet_log::{LogOptions, LogWriter, MapInfo, RunLog};
 use map_core::{CellClass, DistanceField, OccupancyGrid, Sources};
-use protocol::{normalize_angle, Pose2D};
+use protocol::{normalize_angle, MapName, MapRef, Pose2D, PoseEstimate};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use robot_agent::amcl::{
     sensor::beam_likelihood, Amcl, AmclConfig, BeamCombination, LaserModel, LikelihoodField,
     ScanModel,
 };
+use robot_agent::replay::{recorded_config, replay};
+use robot_agent::{AgentConfig, Localization};
 
 /// Odometry noise of the simulated base: well below AMCL's (deliberately pessimistic) 0.2.
 const ODOM_ALPHAS: [f64; 4] = [0.05, 0.05, 0.05, 0.05];
@@ -50,6 +53,20 @@ fn run(
     config: AmclConfig,
     start: Start,
     seed: u64,
+) -> (Vec<Sample>, Amcl) {
+    run_logged(map, truth, legs, config, start, seed, None)
+}
+
+/// [`run`], also writing the drive as a run log (odometry, scans, the published pose and the
+/// ground truth, as the agent and the simulator record them) when `log` is given.
+fn run_logged(
+    map: &OccupancyGrid,
+    truth: &OccupancyGrid,
+    legs: &[Vec<Pose2D>],
+    config: AmclConfig,
+    start: Start,
+    seed: u64,
+    mut log: Option<&mut LogWriter>,
 ) -> (Vec<Sample>, Amcl) {
     for pose in legs.iter().flatten() {
         let (cx, cy) = truth.world_to_cell(pose.x_m, pose.y_m);
@@ -91,6 +108,24 @@ fn run(
             };
             let scan = laser.scan(truth, pose, step as u64, &mut rng);
             let out = amcl.update(&odom, Some(&scan)).unwrap();
+            if let Some(log) = log.as_deref_mut() {
+                log.odom(&odom).unwrap();
+                log.scan(&scan).unwrap();
+                log.ground_truth(scan.header, *pose).unwrap();
+                if let (Some(e), Some(published)) = (amcl.estimate(), amcl.predict_pose(&odom)) {
+                    log.amcl_pose(&PoseEstimate {
+                        header: scan.header,
+                        pose: published,
+                        covariance: e.covariance,
+                        sensor_stamp_ns: scan.header.stamp_ns,
+                        map: MapRef {
+                            name: MapName::new("drive").unwrap(),
+                            version: 1,
+                        },
+                    })
+                    .unwrap();
+                }
+            }
             if out.laser_applied {
                 let e = amcl.estimate().unwrap();
                 samples.push(Sample {
@@ -264,6 +299,93 @@ fn tracks_in_the_turtlebot_sandbox_among_unmapped_obstacles() {
         "max yaw error {:.2} deg",
         s.max_yaw_deg
     );
+}
+
+/// The two tracking drives above, written as run logs while they are driven (the logs that
+/// `scripts/amcl_compare.py` replays through Nav2's filter beside ours; `AMCL_DRIVE_LOG_DIR=DIR`
+/// keeps them as `DIR/amcl_test_depot.mcap` and `DIR/amcl_test_tb3_sandbox.mcap`). Replayed
+/// through the agent's supervisor with the recorded configuration they give the driven
+/// estimates exactly: the logs hold everything the filter used.
+#[test]
+fn the_tracking_drives_recorded_as_logs_replay_as_driven() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = std::env::var_os("AMCL_DRIVE_LOG_DIR")
+        .map_or_else(|| tmp.path().to_path_buf(), std::path::PathBuf::from);
+    let drives = [
+        ("depot", depot_world(), depot_loop(), 1, 11),
+        ("tb3_sandbox", sandbox_world(), sandbox_loop(), 2, 12),
+    ];
+    for (name, (map, truth), route, amcl_seed, drive_seed) in drives {
+        let Start::Pose { offset, .. } = perturbed_start() else {
+            unreachable!("the tracking drives start from a pose")
+        };
+        let initial = Pose2D::new(
+            route[0].x_m + offset.x_m,
+            route[0].y_m + offset.y_m,
+            route[0].yaw_rad + offset.yaw_rad,
+        );
+        let agent = AgentConfig {
+            amcl: AmclConfig {
+                seed: amcl_seed,
+                ..AmclConfig::default()
+            },
+            localization: Localization {
+                initial_pose: Some(initial),
+                initial_position_std_m: 0.2,
+                initial_yaw_std_rad: 0.1,
+            },
+            ..AgentConfig::default()
+        };
+        let covariance = agent.localization.initial_covariance();
+        let path = dir.join(format!("amcl_test_{name}.mcap"));
+        let mut writer = LogWriter::create(&path, LogOptions::default()).unwrap();
+        writer
+            .map(&MapInfo {
+                stamp_ns: 0,
+                name: name.into(),
+                version: 1,
+                path: Some(
+                    test_support::nav2_maps_dir()
+                        .join(format!("{name}.yaml"))
+                        .display()
+                        .to_string(),
+                ),
+                content_hash: Some(map.content_hash()),
+                initial_pose: Some(initial),
+                initial_covariance: Some(covariance),
+                source: format!("robot-agent tests/amcl.rs: {name} tracking drive"),
+            })
+            .unwrap();
+        writer.agent_config(0, &agent).unwrap();
+        let start = Start::Pose {
+            offset,
+            variances: [covariance[0], covariance[4], covariance[8]],
+        };
+        let (samples, _) = run_logged(
+            &map,
+            &truth,
+            &[route],
+            agent.amcl.clone(),
+            start,
+            drive_seed,
+            Some(&mut writer),
+        );
+        writer.finish().unwrap();
+
+        let log = RunLog::open(&path).unwrap();
+        let replayed = replay(&log, &map, &recorded_config(&log).unwrap()).unwrap();
+        assert_eq!(replayed.summary.map_matches, Some(true), "{name}");
+        assert_eq!(replayed.summary.max_live_difference_m, Some(0.0), "{name}");
+        let driven: Vec<f64> = samples.iter().map(|s| s.position_m).collect();
+        let from_log: Vec<f64> = replayed
+            .poses
+            .iter()
+            .filter(|p| p.filter_ran)
+            .map(|p| p.position_error_m.unwrap())
+            .collect();
+        assert_eq!(from_log, driven, "{name}");
+        report(&format!("{name} drive, replayed from its log"), &samples);
+    }
 }
 
 #[test]

@@ -237,7 +237,7 @@ pub fn run(cli: Cli) -> Result<()> {
                     &site,
                     driver_config,
                     recorder,
-                    terminated(),
+                    protocol::shutdown::stop_requested(),
                 )
                 .await?;
                 session
@@ -421,33 +421,6 @@ pub fn bench(scenario: &Path, frames: usize) -> Result<BenchResult> {
         lockstep_with_camera_steps_per_s: rate(steps, step_cam_s),
         threads: 1,
     })
-}
-
-/// Completes on Ctrl-C or SIGTERM (how the fleet demo stops its children).
-async fn terminated() {
-    #[cfg(unix)]
-    {
-        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
-            Ok(mut term) => {
-                tokio::select! {
-                    r = tokio::signal::ctrl_c() => if let Err(e) = r {
-                        tracing::error!("cannot wait for Ctrl-C: {e}");
-                    },
-                    _ = term.recv() => {}
-                }
-            }
-            Err(e) => {
-                tracing::error!("cannot wait for SIGTERM: {e}");
-                if let Err(e) = tokio::signal::ctrl_c().await {
-                    tracing::error!("cannot wait for Ctrl-C: {e}");
-                }
-            }
-        }
-    }
-    #[cfg(not(unix))]
-    if let Err(e) = tokio::signal::ctrl_c().await {
-        tracing::error!("cannot wait for Ctrl-C: {e}");
-    }
 }
 
 #[cfg(test)]

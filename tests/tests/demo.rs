@@ -42,14 +42,15 @@ fn a_killed_agent_is_restarted_and_its_task_resumes_and_completes() {
     let config = data.path().join("demo.toml");
     std::fs::write(&config, "[demo.agent_restart]\ninitial_backoff_ms = 4000\n").unwrap();
     let scenario = repo_root().join("sim/scenarios/task_a.yaml");
-    let demo = Service::start_demo(
+    let logs = data.path().join("logs");
+    let mut demo = Service::start_demo(
         &bins,
         &data.path().join("data"),
         &scenario,
         1,
         TOKEN,
         Some(&config),
-        &[],
+        &["--record-dir", logs.to_str().unwrap()],
     )
     .unwrap();
     assert!(demo.zenoh.starts_with("tcp/127.0.0.1:"), "{}", demo.zenoh);
@@ -113,6 +114,37 @@ fn a_killed_agent_is_restarted_and_its_task_resumes_and_completes() {
         (x - 9.0).hypot(y - 4.0) < 0.6,
         "robot_1 ended at ({x}, {y})"
     );
+
+    // The run was recorded: the killed agent's log stays unfinished (`.partial`), the
+    // restarted agent's and the simulator's are finished when the demo stops (SIGTERM).
+    demo.proc.request_stop();
+    demo.proc
+        .wait_or_kill(std::time::Instant::now() + Duration::from_secs(30));
+    let files: Vec<String> = std::fs::read_dir(&logs)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(logs.join("robot_1.mcap.partial").is_file(), "{files:?}");
+    let agent = fleet_log::RunLog::open(&logs.join("robot_1-restart1.mcap"))
+        .unwrap_or_else(|e| panic!("{e} in {files:?}"));
+    let counts = agent.counts();
+    for topic in [
+        fleet_log::Topic::Scan,
+        fleet_log::Topic::Odom,
+        fleet_log::Topic::AmclPose,
+        fleet_log::Topic::Intention,
+        fleet_log::Topic::CmdVel,
+    ] {
+        assert!(
+            counts.get(&topic).copied().unwrap_or(0) > 10,
+            "{topic}: {counts:?}"
+        );
+    }
+    assert_eq!(agent.map().unwrap().name, "junctions");
+    let sim = fleet_log::RunLog::open(&logs.join("sim.mcap")).unwrap();
+    let truth = sim.ground_truth();
+    let last = truth.last().unwrap().pose;
+    assert!((last.x_m - 9.0).hypot(last.y_m - 4.0) < 0.6, "{last:?}");
 }
 
 #[test]

@@ -93,7 +93,9 @@ pub struct RecordOptions {
     /// A DAgger round: the learner that drives (mixed with the expert by its β); `None`: the
     /// expert drives.
     pub policy: Option<Policy>,
-    /// Shared run settings (the expert's and the agent's configuration, the cycle).
+    /// Shared run settings (the expert's and the agent's configuration, the cycle). With
+    /// `run.record` every episode also writes a run log, named after its episode number;
+    /// the episodes of the last batch that the sample budget cuts off keep theirs too.
     pub run: TableOptions,
     /// The command line, for `index.json` (not part of the dataset id).
     pub command: String,
@@ -414,15 +416,18 @@ struct Episode {
     simulated_s: f64,
 }
 
+/// Runs episode number `episode` (on `loaded`, the `scenario`-th scenario); its seed, and
+/// with it everything random in it, follows from the recording's seed and the number.
 fn run_episode(
     loaded: &Loaded,
     scenario: usize,
-    seed: u64,
-    noisy: bool,
+    episode: u64,
     max_samples: usize,
     options: &RecordOptions,
     progress: &(dyn Fn(u64) + Sync),
 ) -> Result<Episode, RecordError> {
+    let seed = episode_seed(options.seed, episode);
+    let noisy = ChaCha8Rng::seed_from_u64(seed).gen_bool(options.noise);
     let empty = Episode {
         scenario,
         noisy,
@@ -441,6 +446,11 @@ fn run_episode(
     };
     let base = &loaded.prepared;
     let mut scenario_spec = base.scenario.clone();
+    if options.run.record.is_some() {
+        // Names the episode's run log after the dataset's episode number (the `episode`
+        // field of its samples): `episode00012-<scenario>-expert-seed<seed>.mcap`.
+        scenario_spec.name = format!("episode{episode:05}-{}", scenario_spec.name);
+    }
     scenario_spec.start = PoseSpec {
         x_m: start.x_m,
         y_m: start.y_m,
@@ -582,15 +592,12 @@ pub fn record(
                 .map(|&e| {
                     let loaded = &loaded;
                     s.spawn(move || {
-                        let seed = episode_seed(options.seed, e);
                         #[allow(clippy::cast_possible_truncation)]
                         let scenario = (e % loaded.len() as u64) as usize;
-                        let noisy = ChaCha8Rng::seed_from_u64(seed).gen_bool(options.noise);
                         run_episode(
                             &loaded[scenario],
                             scenario,
-                            seed,
-                            noisy,
+                            e,
                             remaining,
                             options,
                             progress,
