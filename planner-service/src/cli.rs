@@ -44,8 +44,15 @@ pub enum Command {
     /// The whole fleet on this machine: the service, the simulator and one agent per robot as
     /// separate processes over Zenoh, until Ctrl-C.
     Demo(DemoArgs),
-    /// Benchmark the replanning loop: N simulated robots sending poses at a rate over Zenoh.
+    /// Benchmark the replanning loop: N simulated robots (a separate process) sending poses at
+    /// a rate over Zenoh.
     BenchFleet(BenchFleetArgs),
+    /// A Zenoh router: forwards between the sessions connected to it, so robots and the
+    /// service on networks that cannot reach each other meet through it (docs/deploy.md).
+    Router(RouterArgs),
+    /// The robots' side of `bench-fleet` (started by it).
+    #[command(hide = true)]
+    BenchRobots(BenchRobotsArgs),
     /// Benchmark task listing and the live-stream snapshot at growing numbers of stored tasks.
     BenchStore(BenchStoreArgs),
     /// Make a site's Zenoh security folder: a CA, a certificate per process and per robot's
@@ -156,6 +163,40 @@ pub struct BenchFleetArgs {
     /// Write the results as JSON here.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Measure with `[path_reuse]` on, and the same load with a new search every cycle as the
+    /// reference in the same run.
+    #[arg(long)]
+    pub path_reuse: bool,
+    /// Seconds of load before the measurement (the first tasks and their first plans, all at
+    /// once: a start-up burst, not the fleet at work).
+    #[arg(long, default_value_t = 3.0)]
+    pub warmup_s: f64,
+}
+
+#[derive(Debug, Args)]
+pub struct RouterArgs {
+    /// The endpoints to listen on (`--zenoh-listen`, repeatable; e.g. tcp/0.0.0.0:7447), other
+    /// routers to connect to, and the site's TLS and access-control files.
+    #[command(flatten)]
+    pub zenoh: SessionArgs,
+}
+
+#[derive(Debug, Args)]
+pub struct BenchRobotsArgs {
+    /// The service's Zenoh endpoint (repeatable).
+    #[arg(long, required = true)]
+    pub connect: Vec<String>,
+    /// The robots, their starts and goals, the site and the map (JSON, written by bench-fleet).
+    #[arg(long)]
+    pub plan: PathBuf,
+    #[arg(long)]
+    pub rate_hz: f64,
+    #[arg(long)]
+    pub duration_s: f64,
+    #[arg(long, default_value_t = 0.0)]
+    pub warmup_s: f64,
+    #[arg(long)]
+    pub speed_mps: f64,
 }
 
 #[derive(Debug, Args)]
@@ -273,6 +314,8 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<()> {
         Command::Serve(args) => serve(&args, out),
         Command::Demo(args) => demo(args, out),
         Command::BenchFleet(args) => bench_fleet(&args, out),
+        Command::BenchRobots(args) => bench_robots(&args, out),
+        Command::Router(args) => router(&args, out),
         Command::BenchStore(args) => bench_store(&args, out),
         Command::Certs(args) => certs(&args, out),
     }
@@ -353,9 +396,12 @@ fn bench_fleet(args: &BenchFleetArgs, out: &mut dyn Write) -> anyhow::Result<()>
         robots: args.robots,
         rate_hz: args.rate_hz,
         duration_s: args.duration_s,
+        warmup_s: args.warmup_s,
         speed_mps: args.speed_mps,
         seed: args.seed,
         config: load_config(args.config.as_deref())?,
+        path_reuse: args.path_reuse,
+        robots_exe: std::env::current_exe().context("cannot find this executable")?,
     };
     let bar = ProgressBar::new(0).with_style(
         ProgressStyle::with_template("{msg} [{bar:40}] {elapsed}")
@@ -369,6 +415,60 @@ fn bench_fleet(args: &BenchFleetArgs, out: &mut dyn Write) -> anyhow::Result<()>
         std::fs::write(path, serde_json::to_string_pretty(&report)?)
             .with_context(|| format!("cannot write {}", path.display()))?;
     }
+    Ok(())
+}
+
+fn router(args: &RouterArgs, out: &mut dyn Write) -> anyhow::Result<()> {
+    runtime()?.block_on(async {
+        let stop = StopSignal::install().context("cannot listen for SIGTERM")?;
+        let session = args
+            .zenoh
+            .open_router()
+            .await
+            .context("cannot start the Zenoh router")?;
+        writeln!(
+            out,
+            "zenoh router: {}",
+            protocol::zenoh_io::locators(&session).await.join(" ")
+        )?;
+        out.flush()?;
+        stop.wait().await.context("cannot listen for Ctrl-C")?;
+        writeln!(out, "stopping")?;
+        session
+            .close()
+            .await
+            .map_err(|e| anyhow::anyhow!("closing the router: {e}"))?;
+        Ok(())
+    })
+}
+
+fn bench_robots(args: &BenchRobotsArgs, out: &mut dyn Write) -> anyhow::Result<()> {
+    let plan: crate::fleet_bench::RobotsPlan = serde_json::from_slice(
+        &std::fs::read(&args.plan)
+            .with_context(|| format!("cannot read {}", args.plan.display()))?,
+    )
+    .with_context(|| format!("{}: not a bench-fleet robots plan", args.plan.display()))?;
+    let opts = crate::fleet_bench::RobotsOptions {
+        connect: args.connect.clone(),
+        plan,
+        rate_hz: args.rate_hz,
+        duration_s: args.duration_s,
+        warmup_s: args.warmup_s,
+        speed_mps: args.speed_mps,
+    };
+    let mut announced = Ok(());
+    let result = runtime()?.block_on(crate::fleet_bench::run_robots(&opts, &mut |line| {
+        if announced.is_ok() {
+            announced = writeln!(out, "{line}").and_then(|()| out.flush());
+        }
+    }))?;
+    announced?;
+    writeln!(
+        out,
+        "{}{}",
+        crate::fleet_bench::RESULT_PREFIX,
+        serde_json::to_string(&result)?
+    )?;
     Ok(())
 }
 

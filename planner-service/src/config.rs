@@ -16,7 +16,7 @@ use crate::restart::{RestartPolicy, RestartPolicyError};
 use planning::intention::dlm::DlmParamsError;
 use planning::intention::{DlmParams, LpeParams};
 use planning::{PlanError, PlannerConfig, ReuseParams};
-use protocol::{LpeParamsError, SessionArgs, SessionError, SiteId};
+use protocol::{LpeParamsError, SessionArgs, SessionError, SessionMode, SiteId};
 
 /// The whole configuration file.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -255,6 +255,8 @@ pub struct ZenohConfig {
     /// Multicast scouting (finds peers on the LAN by itself; off so a stranger's session on
     /// the same network is never picked up).
     pub multicast: bool,
+    /// `peer`, or `client` behind a router on another host (docs/deploy.md).
+    pub mode: SessionMode,
     /// Mutual TLS: the site CA, this service's certificate and key (PEM; `planner-service
     /// certs` makes them). All three or none; with them every endpoint must be `tls/…`.
     pub tls_ca: Option<PathBuf>,
@@ -271,6 +273,7 @@ impl Default for ZenohConfig {
             listen: Vec::new(),
             connect: Vec::new(),
             multicast: false,
+            mode: SessionMode::Peer,
             tls_ca: None,
             tls_cert: None,
             tls_key: None,
@@ -295,6 +298,7 @@ impl ZenohConfig {
             listen: self.listen.clone(),
             connect: self.connect.clone(),
             multicast_scouting: self.multicast,
+            mode: self.mode,
             tls_ca: self.tls_ca.clone(),
             tls_cert: self.tls_cert.clone(),
             tls_key: self.tls_key.clone(),
@@ -309,6 +313,7 @@ impl ZenohConfig {
         self.listen = session.listen;
         self.connect = session.connect;
         self.multicast = session.multicast_scouting;
+        self.mode = session.mode;
         self.tls_ca = session.tls_ca;
         self.tls_cert = session.tls_cert;
         self.tls_key = session.tls_key;

@@ -1,26 +1,40 @@
 //! The fleet benchmark (`planner-service bench-fleet`): how many replans per second the fleet
 //! core sustains with N robots each sending a pose at a fixed rate, and the latency from a
-//! pose leaving a robot to its intention arriving back, over real Zenoh sessions on loopback.
+//! pose leaving a robot to its intention arriving back.
 //!
-//! Simulated robots are kinematic: each follows the newest path it was sent at a fixed speed
-//! and gets a new goal when its task completes, so the load stays that of a fleet at work.
-//! Robots are phase-shifted over the period like unsynchronized real robots. The reference,
-//! in the same run, is the planner alone: the same kind of replans timed on one thread with no
-//! Zenoh, no store and no intention rendering, giving the planning cost the service adds to.
+//! The service side is the fleet core as `serve` runs it (`Fleet`, its redb task store, its
+//! per-robot replanning workers) on a Zenoh TCP listener on loopback. The robots run in a
+//! separate process (`planner-service bench-robots`, started by the benchmark) that connects
+//! to it, so the robots' publishing and decoding does not share the measured process, and
+//! latency is measured where a robot sees it: pose put → the intention answering that pose
+//! received, on the robots' clock.
+//!
+//! Simulated robots are kinematic: each follows the newest path it was sent at a fixed speed;
+//! the benchmark gives a robot its next goal when its task has ended, so the load stays that of
+//! a fleet at work. Robots are phase-shifted over the period like unsynchronized real robots.
+//!
+//! Two references in the same run: with `path_reuse` the same load is run a second time with
+//! a new search every cycle (the paper's behaviour), and the planner alone (the same kind of
+//! replans timed on one thread with no Zenoh, no store and no intention rendering) gives the
+//! planning cost the service adds to.
 
 use std::collections::HashMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::process::Command;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use map_store::{import_into, load_ros_map, ImportLimits, MapStore};
 use protocol::keys::{self, RobotTopic};
-use protocol::{Header, Intention, MapName, MapRef, Pose2D, PoseEstimate, RobotId, SiteId};
-use serde::Serialize;
+use protocol::{
+    Header, Intention, MapName, MapRef, Pose2D, PoseEstimate, RobotId, SessionArgs, SiteId, TaskId,
+};
+use serde::{Deserialize, Serialize};
 
 use crate::bench::Summary;
 use crate::config::ServiceConfig;
-use crate::fleet::{Fleet, Goal, NewTask};
+use crate::fleet::{Fleet, Goal, NewTask, TaskStateKind};
+use crate::launch::Process;
 use planning::sample::{pose_along, sample_pairs};
 use planning::{Planner, PlanningMap};
 
@@ -31,12 +45,43 @@ pub struct FleetBenchOptions {
     pub robots: usize,
     pub rate_hz: f64,
     pub duration_s: f64,
+    /// Seconds of load before the measured `duration_s` (first tasks and their first plans).
+    pub warmup_s: f64,
     pub speed_mps: f64,
     pub seed: u64,
     pub config: ServiceConfig,
+    /// Measure with `[path_reuse]` on (and full replanning as the reference in the same run);
+    /// off: the configuration's setting, measured alone.
+    pub path_reuse: bool,
+    /// The `planner-service` executable that runs `bench-robots`.
+    pub robots_exe: PathBuf,
 }
 
-/// The results (JSON) of one run.
+/// The figures of one measured run (one replanning mode).
+#[derive(Debug, Clone, Serialize)]
+pub struct ModeFigures {
+    /// Whether a robot's kept plan could answer instead of a new search.
+    pub path_reuse: bool,
+    pub duration_s: f64,
+    pub poses_sent: u64,
+    pub intentions_received: u64,
+    /// Share of poses that got their own answer (the rest were superseded by a newer pose
+    /// while the robot's worker was busy, by design).
+    pub answered_fraction: f64,
+    /// Intentions answering a pose per second (each is one replan, or a stop when idle).
+    pub replans_per_s: f64,
+    pub p50_ms: f64,
+    pub p99_ms: f64,
+    /// Pose sent by the robot to intention received by it, measured by the robots' process.
+    pub latency_ms: Summary,
+    /// Replans of robots with a task, and of those the answers from a kept plan (no search).
+    pub replans: u64,
+    pub kept_plan_answers: u64,
+    pub tasks_created: u64,
+    pub tasks_completed: u64,
+}
+
+/// The results (JSON) of one benchmark.
 #[derive(Debug, Clone, Serialize)]
 pub struct FleetBenchReport {
     pub command: String,
@@ -44,18 +89,17 @@ pub struct FleetBenchReport {
     pub map: String,
     pub robots: usize,
     pub rate_hz: f64,
-    pub duration_s: f64,
-    pub poses_sent: u64,
-    pub intentions_received: u64,
-    /// Intentions answering a pose per second (each is one replan, or a stop when idle).
-    pub replans_per_s: f64,
-    /// Share of poses that got their own answer (the rest were superseded by a newer pose
-    /// while the robot's worker was busy, by design).
+    /// Seconds of load before each measured run (not counted).
+    pub warmup_s: f64,
+    /// The measured mode's headline figures (as in `measured`).
+    pub path_reuse: bool,
     pub answered_fraction: f64,
-    /// Pose sent by the robot to intention received by it.
-    pub latency_ms: Summary,
-    pub tasks_created: u64,
-    pub tasks_completed: u64,
+    pub p50_ms: f64,
+    pub p99_ms: f64,
+    pub replans_per_s: f64,
+    pub measured: ModeFigures,
+    /// The same load with a new search every cycle; `None` when that is what was measured.
+    pub full_replanning: Option<ModeFigures>,
     /// The planner alone on one thread: mean replan time and the replans per second all cores
     /// could do at that cost.
     pub reference_replan_ms: Summary,
@@ -79,21 +123,87 @@ fn setup(e: impl std::fmt::Display) -> FleetBenchError {
     FleetBenchError::Setup(e.to_string())
 }
 
-struct SimRobot {
-    id: RobotId,
-    pose: Pose2D,
-    seq: u64,
-    goals: Vec<Pose2D>,
-    next_goal: usize,
+/// One simulated robot: where it starts and the goals it is sent to in turn.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BenchRobot {
+    pub id: RobotId,
+    pub start: Pose2D,
+    pub goals: Vec<Pose2D>,
 }
 
-#[derive(Default)]
-struct Received {
-    sent: HashMap<(usize, u64), Instant>,
-    latencies_ms: Vec<f64>,
-    paths: HashMap<usize, Vec<Pose2D>>,
-    idle: HashMap<usize, bool>,
-    count: u64,
+/// What the robots' process is given (`bench-robots --plan FILE`, JSON).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotsPlan {
+    pub site: SiteId,
+    pub map: MapRef,
+    pub robots: Vec<BenchRobot>,
+}
+
+/// How the robots' process runs.
+#[derive(Debug, Clone)]
+pub struct RobotsOptions {
+    /// The service's Zenoh endpoints.
+    pub connect: Vec<String>,
+    pub plan: RobotsPlan,
+    pub rate_hz: f64,
+    pub duration_s: f64,
+    /// Seconds of load, not measured, before `duration_s`.
+    pub warmup_s: f64,
+    pub speed_mps: f64,
+}
+
+/// What the robots' process measured (its last stdout line, after [`RESULT_PREFIX`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotsResult {
+    pub duration_s: f64,
+    pub poses_sent: u64,
+    pub answered: u64,
+    pub latency_ms: Summary,
+}
+
+/// The robots' process prints this line once every robot has had an answer.
+pub const READY_LINE: &str = "bench-robots: ready";
+/// ... and its result after this prefix.
+pub const RESULT_PREFIX: &str = "bench-robots: result ";
+
+fn validate(
+    robots: usize,
+    rate_hz: f64,
+    duration_s: f64,
+    warmup_s: f64,
+) -> Result<(), FleetBenchError> {
+    if !(warmup_s >= 0.0 && warmup_s.is_finite()) {
+        return Err(FleetBenchError::Invalid {
+            field: "warmup_s",
+            value: warmup_s.to_string(),
+            reason: "must be zero or positive",
+        });
+    }
+    if robots == 0 {
+        return Err(FleetBenchError::Invalid {
+            field: "robots",
+            value: "0".into(),
+            reason: "need at least one robot",
+        });
+    }
+    if !(rate_hz > 0.0 && rate_hz <= 100.0) {
+        return Err(FleetBenchError::Invalid {
+            field: "rate_hz",
+            value: rate_hz.to_string(),
+            reason: "must lie in (0, 100]",
+        });
+    }
+    if !(duration_s > 0.0 && duration_s.is_finite()) {
+        return Err(FleetBenchError::Invalid {
+            field: "duration_s",
+            value: duration_s.to_string(),
+            reason: "must be positive",
+        });
+    }
+    Ok(())
 }
 
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
@@ -103,32 +213,13 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 /// Runs the benchmark (needs a multi-threaded tokio runtime).
 ///
 /// # Errors
-/// Bad options, a map that cannot be loaded, Zenoh or store failures.
+/// Bad options, a map that cannot be loaded, Zenoh or store failures, a robots' process that
+/// does not start or report.
 pub async fn run_fleet_bench(
     opts: &FleetBenchOptions,
     progress: &indicatif::ProgressBar,
 ) -> Result<FleetBenchReport, FleetBenchError> {
-    if opts.robots == 0 {
-        return Err(FleetBenchError::Invalid {
-            field: "robots",
-            value: "0".into(),
-            reason: "need at least one robot",
-        });
-    }
-    if !(opts.rate_hz > 0.0 && opts.rate_hz <= 100.0) {
-        return Err(FleetBenchError::Invalid {
-            field: "rate_hz",
-            value: opts.rate_hz.to_string(),
-            reason: "must lie in (0, 100]",
-        });
-    }
-    if !(opts.duration_s > 0.0 && opts.duration_s.is_finite()) {
-        return Err(FleetBenchError::Invalid {
-            field: "duration_s",
-            value: opts.duration_s.to_string(),
-            reason: "must be positive",
-        });
-    }
+    validate(opts.robots, opts.rate_hz, opts.duration_s, opts.warmup_s)?;
     let data = tempfile::tempdir().map_err(setup)?;
     let store = MapStore::open(&data.path().join("maps")).map_err(setup)?;
     let name = MapName::new("bench").map_err(setup)?;
@@ -140,52 +231,299 @@ pub async fn run_fleet_bench(
         &ImportLimits::default(),
     )
     .map_err(setup)?;
-    let map_ref = MapRef {
-        name: name.clone(),
-        version: meta.version,
-    };
     let grid = load_ros_map(&opts.map_yaml, &ImportLimits::default())
         .map_err(setup)?
         .grid;
     let planning = Arc::new(PlanningMap::new(grid, &opts.config.planner).map_err(setup)?);
     // Starts, and goals: each robot gets 8 goals in a row, visited in turn.
     let pairs = sample_pairs(&planning, opts.robots * 9, opts.seed, 6.0, "bench").map_err(setup)?;
-    let mut robots: Vec<SimRobot> = (0..opts.robots)
+    let robots = (0..opts.robots)
         .map(|i| {
-            let id = RobotId::new(format!("bench_{i:03}")).map_err(setup)?;
-            let goals = pairs[opts.robots + i * 8..opts.robots + i * 8 + 8]
-                .iter()
-                .map(|p| p.1)
-                .collect();
-            Ok(SimRobot {
-                id,
-                pose: pairs[i].0,
-                seq: 0,
-                goals,
-                next_goal: 0,
+            Ok(BenchRobot {
+                id: RobotId::new(format!("bench_{i:03}")).map_err(setup)?,
+                start: pairs[i].0,
+                goals: pairs[opts.robots + i * 8..opts.robots + i * 8 + 8]
+                    .iter()
+                    .map(|p| p.1)
+                    .collect(),
             })
         })
-        .collect::<Result<_, FleetBenchError>>()?;
+        .collect::<Result<Vec<_>, FleetBenchError>>()?;
+    let plan = RobotsPlan {
+        site: SiteId::default(),
+        map: MapRef {
+            name,
+            version: meta.version,
+        },
+        robots,
+    };
+    let reference = reference_replans(&planning, &opts.config, &plan.robots, opts.speed_mps)?;
 
-    let reference = reference_replans(&planning, &opts.config, &robots, opts.speed_mps)?;
-    let (server, client) = protocol::zenoh_io::loopback_pair().await.map_err(setup)?;
-    let site = SiteId::default();
-    let fleet = Fleet::start(
-        server,
-        site.clone(),
-        Arc::new(store),
-        data.path(),
-        opts.config.clone(),
+    let store = Arc::new(store);
+    let modes: Vec<bool> = if opts.path_reuse {
+        vec![true, false]
+    } else {
+        vec![opts.config.path_reuse.enabled]
+    };
+    let run_ms = (opts.warmup_s + opts.duration_s) * 1e3;
+    #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+    progress.set_length((run_ms * modes.len() as f64) as u64);
+    let mut figures = Vec::new();
+    for (k, &reuse) in modes.iter().enumerate() {
+        let dir = data.path().join(if reuse { "reuse" } else { "full" });
+        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+        let offset_ms = (run_ms * k as f64) as u64;
+        figures.push(run_mode(opts, &store, &plan, reuse, &dir, progress, offset_ms).await?);
+    }
+    let mut figures = figures.into_iter();
+    let measured = figures.next().ok_or_else(|| setup("no run"))?;
+    let full_replanning = figures.next();
+    let cores = std::thread::available_parallelism().map_or(1, std::num::NonZero::get);
+    #[allow(clippy::cast_precision_loss)]
+    Ok(FleetBenchReport {
+        command: std::env::args().collect::<Vec<_>>().join(" "),
+        cpu_cores: cores,
+        map: opts.map_yaml.display().to_string(),
+        robots: opts.robots,
+        rate_hz: opts.rate_hz,
+        warmup_s: opts.warmup_s,
+        path_reuse: measured.path_reuse,
+        answered_fraction: measured.answered_fraction,
+        p50_ms: measured.p50_ms,
+        p99_ms: measured.p99_ms,
+        replans_per_s: measured.replans_per_s,
+        measured,
+        full_replanning,
+        reference_capacity_per_s: if reference.mean > 0.0 {
+            cores as f64 * 1e3 / reference.mean
+        } else {
+            0.0
+        },
+        reference_replan_ms: reference,
+    })
+}
+
+/// One measured run: a fresh fleet core on a loopback listener, the robots' process against
+/// it, goals fed as tasks end.
+async fn run_mode(
+    opts: &FleetBenchOptions,
+    store: &Arc<MapStore>,
+    plan: &RobotsPlan,
+    reuse: bool,
+    dir: &Path,
+    progress: &indicatif::ProgressBar,
+    progress_offset_ms: u64,
+) -> Result<ModeFigures, FleetBenchError> {
+    let mut config = opts.config.clone();
+    config.path_reuse.enabled = reuse;
+    std::fs::create_dir_all(dir).map_err(setup)?;
+    let plan_file = dir.join("robots.json");
+    std::fs::write(&plan_file, serde_json::to_vec(plan).map_err(setup)?).map_err(setup)?;
+    let session = SessionArgs::new(&["tcp/127.0.0.1:0".to_string()], &[])
+        .open()
+        .await
+        .map_err(setup)?;
+    let endpoints = protocol::zenoh_io::locators(&session).await;
+    if endpoints.is_empty() {
+        return Err(setup(
+            "the benchmark's Zenoh session listens on no endpoint",
+        ));
+    }
+    let fleet = Fleet::start(session, plan.site.clone(), Arc::clone(store), dir, config)
+        .await
+        .map_err(setup)?;
+    let result = drive(
+        opts,
+        &fleet,
+        plan,
+        &plan_file,
+        &endpoints,
+        progress,
+        progress_offset_ms,
     )
-    .await
-    .map_err(setup)?;
+    .await;
+    let figures = match result {
+        Ok((robots, tasks_created)) => {
+            let completed = fleet
+                .tasks(&crate::fleet::TaskFilter {
+                    state: Some(TaskStateKind::Completed),
+                    limit: Some(crate::fleet::TaskFilter::MAX_LIMIT),
+                    ..Default::default()
+                })
+                .map_err(setup)?
+                .len();
+            let metrics = fleet.metrics();
+            #[allow(clippy::cast_precision_loss)]
+            Ok(ModeFigures {
+                path_reuse: reuse,
+                duration_s: robots.duration_s,
+                poses_sent: robots.poses_sent,
+                intentions_received: robots.answered,
+                answered_fraction: if robots.poses_sent == 0 {
+                    0.0
+                } else {
+                    robots.answered as f64 / robots.poses_sent as f64
+                },
+                replans_per_s: robots.answered as f64 / robots.duration_s.max(1e-9),
+                p50_ms: robots.latency_ms.p50,
+                p99_ms: robots.latency_ms.p99,
+                latency_ms: robots.latency_ms,
+                replans: metrics.replans_total(),
+                kept_plan_answers: metrics.replans_reused_total(),
+                tasks_created,
+                tasks_completed: completed as u64,
+            })
+        }
+        Err(e) => Err(e),
+    };
+    fleet.shutdown().await;
+    figures
+}
 
+/// Starts the robots' process, feeds tasks until it reports; what it measured and the tasks
+/// created.
+async fn drive(
+    opts: &FleetBenchOptions,
+    fleet: &Arc<Fleet>,
+    plan: &RobotsPlan,
+    plan_file: &Path,
+    endpoints: &[String],
+    progress: &indicatif::ProgressBar,
+    progress_offset_ms: u64,
+) -> Result<(RobotsResult, u64), FleetBenchError> {
+    let mut cmd = Command::new(&opts.robots_exe);
+    cmd.arg("bench-robots")
+        .arg("--plan")
+        .arg(plan_file)
+        .arg("--rate-hz")
+        .arg(opts.rate_hz.to_string())
+        .arg("--duration-s")
+        .arg(opts.duration_s.to_string())
+        .arg("--warmup-s")
+        .arg(opts.warmup_s.to_string())
+        .arg("--speed-mps")
+        .arg(opts.speed_mps.to_string())
+        .env("RUST_LOG", "warn");
+    for e in endpoints {
+        cmd.arg("--connect").arg(e);
+    }
+    let mut robots_proc = Process::spawn("bench-robots", cmd).map_err(setup)?;
+    let ready_timeout = Duration::from_secs(60);
+    let mut robots_proc = tokio::task::spawn_blocking(move || {
+        robots_proc
+            .wait_line(ready_timeout, |l| (l.trim() == READY_LINE).then_some(()))
+            .map(|()| robots_proc)
+    })
+    .await
+    .map_err(setup)?
+    .map_err(setup)?;
+    let result_timeout = Duration::from_secs_f64(opts.warmup_s + opts.duration_s + 60.0);
+    let waiting = tokio::task::spawn_blocking(move || {
+        let result = robots_proc.wait_line(result_timeout, |l| {
+            l.trim()
+                .strip_prefix(RESULT_PREFIX)
+                .map(serde_json::from_str::<RobotsResult>)
+        });
+        (robots_proc, result)
+    });
+
+    // Next goal index and current task of each robot.
+    let mut feeding: Vec<(usize, Option<TaskId>)> = vec![(0, None); plan.robots.len()];
+    let mut tasks_created = 0u64;
+    let started = Instant::now();
+    while !waiting.is_finished() {
+        for (r, (next, current)) in plan.robots.iter().zip(feeding.iter_mut()) {
+            let ended = current
+                .as_ref()
+                .is_none_or(|id| fleet.task(id).is_ok_and(|t| t.state.is_terminal()));
+            if !ended || r.goals.is_empty() {
+                continue;
+            }
+            let goal = r.goals[*next % r.goals.len()];
+            let req = NewTask {
+                map: plan.map.name.clone(),
+                robot_id: Some(r.id.clone()),
+                goals: vec![Goal {
+                    x_m: goal.x_m,
+                    y_m: goal.y_m,
+                    yaw_rad: None,
+                }],
+            };
+            // A robot the service has not seen yet, or still busy: try again next tick.
+            if let Ok(task) = fleet.create_task(req) {
+                *current = Some(task.id);
+                *next += 1;
+                tasks_created += 1;
+            }
+        }
+        progress.set_position(
+            progress_offset_ms + u64::try_from(started.elapsed().as_millis()).unwrap_or(0),
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    let (mut robots_proc, result) = waiting.await.map_err(setup)?;
+    robots_proc.wait_or_kill(Instant::now() + Duration::from_secs(5));
+    let result = result
+        .map_err(setup)?
+        .map_err(|e| setup(format!("bench-robots reported a bad result: {e}")))?;
+    Ok((result, tasks_created))
+}
+
+struct SimRobot {
+    id: RobotId,
+    pose: Pose2D,
+    seq: u64,
+}
+
+#[derive(Default)]
+struct Received {
+    sent: HashMap<(usize, u64), Instant>,
+    latencies_ms: Vec<f64>,
+    paths: HashMap<usize, Vec<Pose2D>>,
+    idle: HashMap<usize, bool>,
+    count: u64,
+}
+
+/// The robots' side (`planner-service bench-robots`): connects to the service, waits until
+/// every robot has had an answer (then `announce`s [`READY_LINE`]), then sends poses at the
+/// rate for the duration, each robot following the newest path it was sent while it has a
+/// task, and measures pose → intention latency.
+///
+/// # Errors
+/// Bad options, Zenoh failures, robots the service never answers within 30 s.
+pub async fn run_robots(
+    opts: &RobotsOptions,
+    announce: &mut dyn FnMut(&str),
+) -> Result<RobotsResult, FleetBenchError> {
+    validate(
+        opts.plan.robots.len(),
+        opts.rate_hz,
+        opts.duration_s,
+        opts.warmup_s,
+    )?;
+    let session = SessionArgs::new(&[], &opts.connect)
+        .open()
+        .await
+        .map_err(setup)?;
+    let site = &opts.plan.site;
+    let map_ref = &opts.plan.map;
+    let mut robots: Vec<SimRobot> = opts
+        .plan
+        .robots
+        .iter()
+        .map(|r| SimRobot {
+            id: r.id.clone(),
+            pose: r.start,
+            seq: 0,
+        })
+        .collect();
+    let n = robots.len();
     let received = Arc::new(Mutex::new(Received::default()));
     let mut subs = Vec::new();
     for (i, r) in robots.iter().enumerate() {
         let rx = Arc::clone(&received);
-        let sub = client
-            .declare_subscriber(keys::robot(&site, &r.id, RobotTopic::Intention))
+        let sub = session
+            .declare_subscriber(keys::robot(site, &r.id, RobotTopic::Intention))
             .callback(move |s| {
                 let Ok(intention) = protocol::decode_sample::<Intention>(&s) else {
                     return;
@@ -204,41 +542,62 @@ pub async fn run_fleet_bench(
             .map_err(setup)?;
         subs.push(sub);
     }
-    // Every robot reports until the service knows it (the first puts may leave before the
+    // Every robot reports until it has an answer (the first puts may leave before the
     // service's subscription has reached this session).
     let deadline = Instant::now() + Duration::from_secs(30);
     loop {
-        let known: std::collections::HashSet<RobotId> =
-            fleet.robots().into_iter().map(|r| r.id).collect();
-        if known.len() >= opts.robots {
+        let answered: Vec<bool> = {
+            let g = lock(&received);
+            (0..n).map(|i| g.idle.contains_key(&i)).collect()
+        };
+        if answered.iter().all(|a| *a) {
             break;
         }
         if Instant::now() > deadline {
-            return Err(setup("the service did not see every robot within 30 s"));
+            let missing = answered.iter().filter(|a| !**a).count();
+            return Err(setup(format!(
+                "{missing} of {n} robots got no answer from the service within 30 s"
+            )));
         }
         for (i, r) in robots.iter_mut().enumerate() {
-            if !known.contains(&r.id) {
-                publish_pose(&client, &site, r, &map_ref, i, &received).await?;
+            if !answered[i] {
+                publish_pose(&session, site, r, map_ref, i, &received).await?;
             }
         }
         tokio::time::sleep(Duration::from_millis(100)).await;
     }
-    lock(&received).latencies_ms.clear();
-    lock(&received).count = 0;
+    {
+        let mut g = lock(&received);
+        g.latencies_ms.clear();
+        g.count = 0;
+        g.sent.clear();
+    }
+    announce(READY_LINE);
 
     let period = Duration::from_secs_f64(1.0 / opts.rate_hz);
-    let dt_s = period.as_secs_f64();
-    let mut tasks_created = 0u64;
-    let t0 = Instant::now();
-    let run_for = Duration::from_secs_f64(opts.duration_s);
+    let step_m = opts.speed_mps * period.as_secs_f64();
+    let start = Instant::now();
+    let warmup = Duration::from_secs_f64(opts.warmup_s.max(0.0));
+    let mut t0 = start;
+    let mut warming = !warmup.is_zero();
+    let run_for = warmup + Duration::from_secs_f64(opts.duration_s);
     let mut poses_sent = 0u64;
-    let slot = period / u32::try_from(opts.robots).unwrap_or(u32::MAX);
-    let mut next_due: Vec<Instant> = (0..opts.robots)
+    let slot = period / u32::try_from(n).unwrap_or(u32::MAX);
+    let mut next_due: Vec<Instant> = (0..n)
         .map(|i| t0 + slot * u32::try_from(i).unwrap_or(0))
         .collect();
-    progress.set_length(u64::try_from(run_for.as_millis()).unwrap_or(u64::MAX));
-    while t0.elapsed() < run_for {
+    while start.elapsed() < run_for {
         let now = Instant::now();
+        if warming && now >= start + warmup {
+            // The measured part starts: answers to warm-up poses no longer count.
+            warming = false;
+            t0 = now;
+            poses_sent = 0;
+            let mut g = lock(&received);
+            g.latencies_ms.clear();
+            g.count = 0;
+            g.sent.clear();
+        }
         for (i, r) in robots.iter_mut().enumerate() {
             if now < next_due[i] {
                 continue;
@@ -251,79 +610,34 @@ pub async fn run_fleet_bench(
                     g.idle.get(&i).copied().unwrap_or(true),
                 )
             };
-            if idle {
-                if let Some(goal) = r.goals.get(r.next_goal % r.goals.len()).copied() {
-                    let req = NewTask {
-                        map: name.clone(),
-                        robot_id: Some(r.id.clone()),
-                        goals: vec![Goal {
-                            x_m: goal.x_m,
-                            y_m: goal.y_m,
-                            yaw_rad: None,
-                        }],
-                    };
-                    // A busy robot (its last answer was idle but a task just started) is fine.
-                    if fleet.create_task(req).is_ok() {
-                        tasks_created += 1;
-                        lock(&received).idle.insert(i, false);
-                    }
-                    r.next_goal += 1;
+            if !idle {
+                if let Some(p) = path.and_then(|p| advance(&p, step_m)) {
+                    r.pose = p;
                 }
-            } else if let Some(p) = path.and_then(|p| advance(&p, opts.speed_mps * dt_s)) {
-                r.pose = p;
             }
-            publish_pose(&client, &site, r, &map_ref, i, &received).await?;
+            publish_pose(&session, site, r, map_ref, i, &received).await?;
             poses_sent += 1;
         }
-        progress.set_position(u64::try_from(t0.elapsed().as_millis()).unwrap_or(0));
         let next = next_due.iter().min().copied().unwrap_or(now + period);
         tokio::time::sleep_until(tokio::time::Instant::from_std(next)).await;
     }
-    let elapsed_s = t0.elapsed().as_secs_f64();
+    let duration_s = t0.elapsed().as_secs_f64();
     // Answers in flight at the end still count.
     tokio::time::sleep(Duration::from_millis(200)).await;
-    let (latencies, count) = {
+    let (latencies, answered) = {
         let g = lock(&received);
         (g.latencies_ms.clone(), g.count)
     };
-    let completed = fleet
-        .tasks(&crate::fleet::TaskFilter {
-            state: Some(crate::fleet::TaskStateKind::Completed),
-            limit: Some(crate::fleet::TaskFilter::MAX_LIMIT),
-            ..Default::default()
-        })
-        .map_err(setup)?
-        .len();
     drop(subs);
-    fleet.shutdown().await;
-    let cores = std::thread::available_parallelism().map_or(1, std::num::NonZero::get);
-    #[allow(clippy::cast_precision_loss)]
-    let report = FleetBenchReport {
-        command: std::env::args().collect::<Vec<_>>().join(" "),
-        cpu_cores: cores,
-        map: opts.map_yaml.display().to_string(),
-        robots: opts.robots,
-        rate_hz: opts.rate_hz,
-        duration_s: elapsed_s,
+    if let Err(e) = session.close().await {
+        tracing::warn!("closing the robots' session: {e}");
+    }
+    Ok(RobotsResult {
+        duration_s,
         poses_sent,
-        intentions_received: count,
-        replans_per_s: count as f64 / elapsed_s,
-        answered_fraction: if poses_sent == 0 {
-            0.0
-        } else {
-            count as f64 / poses_sent as f64
-        },
+        answered,
         latency_ms: Summary::of(&latencies),
-        tasks_created,
-        tasks_completed: completed as u64,
-        reference_capacity_per_s: if reference.mean > 0.0 {
-            cores as f64 * 1e3 / reference.mean
-        } else {
-            0.0
-        },
-        reference_replan_ms: reference,
-    };
-    Ok(report)
+    })
 }
 
 async fn publish_pose(
@@ -374,7 +688,7 @@ fn advance(path: &[Pose2D], step_m: f64) -> Option<Pose2D> {
 fn reference_replans(
     map: &Arc<PlanningMap>,
     config: &ServiceConfig,
-    robots: &[SimRobot],
+    robots: &[BenchRobot],
     speed_mps: f64,
 ) -> Result<Summary, FleetBenchError> {
     let mut planner = Planner::new(Arc::clone(map), config.planner.clone()).map_err(setup)?;
@@ -383,7 +697,7 @@ fn reference_replans(
         let Some(goal) = r.goals.first().copied() else {
             continue;
         };
-        let Ok(first) = planner.plan(r.pose, goal) else {
+        let Ok(first) = planner.plan(r.start, goal) else {
             continue;
         };
         for k in 1..=20 {
@@ -399,25 +713,38 @@ fn reference_replans(
     Ok(Summary::of(&times))
 }
 
-/// The report as a markdown table.
+/// The report as a markdown table: one row per replanning mode.
 #[must_use]
 pub fn markdown(r: &FleetBenchReport) -> String {
-    format!(
-        "| robots | rate | poses sent | answered | replans/s | latency mean | p50 | p99 | max | tasks done | planner alone (1 thread) | planner capacity ({} cores) |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|\n\
-         | {} | {:.0} Hz | {} | {:.1} % | {:.0} | {:.2} ms | {:.2} ms | {:.2} ms | {:.2} ms | {} | {:.2} ms/replan | {:.0}/s |\n",
-        r.cpu_cores,
-        r.robots,
-        r.rate_hz,
-        r.poses_sent,
-        r.answered_fraction * 100.0,
-        r.replans_per_s,
-        r.latency_ms.mean,
-        r.latency_ms.p50,
-        r.latency_ms.p99,
-        r.latency_ms.max,
-        r.tasks_completed,
-        r.reference_replan_ms.mean,
-        r.reference_capacity_per_s,
-    )
+    let mut out = String::from(
+        "| robots | rate | replanning | poses sent | answered | replans/s | kept-plan answers | latency mean | p50 | p99 | max | tasks done |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for m in std::iter::once(&r.measured).chain(r.full_replanning.as_ref()) {
+        #[allow(clippy::cast_precision_loss)]
+        let kept = if m.replans == 0 {
+            0.0
+        } else {
+            100.0 * m.kept_plan_answers as f64 / m.replans as f64
+        };
+        out.push_str(&format!(
+            "| {} | {:.0} Hz | {} | {} | {:.1} % | {:.0} | {kept:.1} % | {:.2} ms | {:.2} ms | {:.2} ms | {:.2} ms | {} |\n",
+            r.robots,
+            r.rate_hz,
+            if m.path_reuse { "path reuse" } else { "full" },
+            m.poses_sent,
+            m.answered_fraction * 100.0,
+            m.replans_per_s,
+            m.latency_ms.mean,
+            m.latency_ms.p50,
+            m.latency_ms.p99,
+            m.latency_ms.max,
+            m.tasks_completed,
+        ));
+    }
+    out.push_str(&format!(
+        "\nplanner alone (1 thread): {:.2} ms/replan, capacity {:.0}/s on {} cores\n",
+        r.reference_replan_ms.mean, r.reference_capacity_per_s, r.cpu_cores
+    ));
+    out
 }

@@ -163,7 +163,11 @@ fn a_kept_plan_answers_like_a_new_search_while_the_robot_follows_it() {
     let pairs = sample_pairs(&map, 6, 23, 6.0, "depot").unwrap();
     let mut fresh = IntentionPlanner::new(Arc::clone(&map), fresh_config).unwrap();
     let mut kept = IntentionPlanner::new(Arc::clone(&map), reuse_config).unwrap();
+    // The reference's own repeatability: a second new search every cycle from the same true
+    // pose with other jitter of the same size.
+    let mut other = IntentionPlanner::new(Arc::clone(&map), IntentionConfig::default()).unwrap();
     let (mut cycles, mut same_dlm, mut reused, mut longer) = (0_u32, 0_u32, 0_u32, 0_u32);
+    let mut same_reference = 0_u32;
     for (k, (start, end)) in pairs.iter().enumerate() {
         let goals = [Goal::at(end.x_m, end.y_m)];
         let progress = GoalProgress::new(&goals, 0);
@@ -187,6 +191,17 @@ fn a_kept_plan_answers_like_a_new_search_while_the_robot_follows_it() {
             cycles += 1;
             same_dlm += u32::from(a.dlm == b.dlm);
             reused += u32::from(b.reused);
+            let jitter = ((step * 7 + k as u64 + 3) as f64).sin();
+            let other_pose = Pose2D::new(
+                robot.x_m + 0.03 * jitter,
+                robot.y_m - 0.03 * jitter,
+                robot.yaw_rad + 0.03 * jitter,
+            );
+            if let Answer::Heading { plan: Ok(c), .. } =
+                other.answer(&estimate(other_pose, step), &progress, false)
+            {
+                same_reference += u32::from(c.dlm == a.dlm);
+            }
             assert!(!a.reused, "reuse is off by default");
             assert!(
                 b.path[0].distance_m(&reported) < 1e-9,
@@ -200,14 +215,22 @@ fn a_kept_plan_answers_like_a_new_search_while_the_robot_follows_it() {
         }
     }
     println!(
-        "{cycles} cycles: same DLM {same_dlm}, kept plan answered {reused}, kept route over 1.2x a new search's {longer}"
+        "{cycles} cycles: same DLM {same_dlm}, kept plan answered {reused}, kept route over 1.2x a new search's {longer}; \
+         a new search with other jitter gives the same DLM in {same_reference}"
     );
     assert!(cycles > 300, "{cycles} cycles");
     let same = f64::from(same_dlm) / f64::from(cycles);
+    let repeatable = f64::from(same_reference) / f64::from(cycles);
     let kept_share = f64::from(reused) / f64::from(cycles);
-    // Measured 0.952 (1561 of 1639 cycles); issue 16's target is 0.99, not reached yet (where
-    // the two differ has not been analysed).
+    // Measured 0.952 (1561 of 1639 cycles) against 0.955 (1566) for the reference against
+    // itself: nearly all differences are curvatures within ±0.1/m of the 0.3/m turn threshold,
+    // where 3 cm / 0.03 rad of jitter flips a new search's DLM as often as reuse does
+    // (docs/benchmarks.md, "Path reuse"). Issue 16's 0.99 is above the reference's own 0.955.
     assert!(same >= 0.93, "same DLM in {same:.3} of {cycles} cycles");
+    assert!(
+        same >= repeatable - 0.01,
+        "reuse agrees with a new search in {same:.3}, a new search with itself in {repeatable:.3}"
+    );
     assert!(
         kept_share >= 0.8,
         "kept plan answered {kept_share:.3} of {cycles} cycles"

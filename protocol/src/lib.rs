@@ -92,5 +92,5 @@ pub use messages::{
 };
 pub use zenoh_io::{
     decode_sample, encoding_for, loopback_pair, peer_config, PublishError, SessionArgs,
-    SessionError,
+    SessionError, SessionMode,
 };

@@ -164,6 +164,14 @@ pub struct SessionArgs {
     )]
     #[serde(rename = "multicast", alias = "multicast_scouting")]
     pub multicast_scouting: bool,
+    /// `peer` (default) or `client`. A client talks only through the router it connects to:
+    /// what processes on different hosts use behind a router (docs/deploy.md), since peers
+    /// expect to reach each other directly and a router does not forward between them.
+    #[cfg_attr(
+        feature = "cli",
+        arg(long = "zenoh-mode", value_name = "MODE", value_enum, default_value_t)
+    )]
+    pub mode: SessionMode,
     /// The site CA's certificate (PEM) that peers' certificates must chain to; with
     /// --zenoh-tls-cert and --zenoh-tls-key it turns on mutual TLS (tls/ endpoints only).
     #[cfg_attr(
@@ -185,6 +193,27 @@ pub struct SessionArgs {
     #[cfg_attr(feature = "cli", arg(long = "zenoh-acl", value_name = "JSON5"))]
     #[serde(skip_serializing_if = "Option::is_none")]
     pub acl: Option<PathBuf>,
+}
+
+/// How a session takes part in the Zenoh network.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum SessionMode {
+    /// Talks to the sessions it reaches directly (and through routers to their peers' routers).
+    #[default]
+    Peer,
+    /// Talks only through the router it connects to, and listens on nothing.
+    Client,
+}
+
+impl SessionMode {
+    fn as_str(self) -> &'static str {
+        match self {
+            SessionMode::Peer => "peer",
+            SessionMode::Client => "client",
+        }
+    }
 }
 
 /// The TLS files of a session, all three present.
@@ -223,6 +252,9 @@ impl SessionArgs {
             self.connect.clone_from(&flags.connect);
         }
         self.multicast_scouting |= flags.multicast_scouting;
+        if flags.mode != SessionMode::default() {
+            self.mode = flags.mode;
+        }
         for (mine, theirs) in [
             (&mut self.tls_ca, &flags.tls_ca),
             (&mut self.tls_cert, &flags.tls_cert),
@@ -271,9 +303,12 @@ impl SessionArgs {
         }
     }
 
-    /// The listen endpoints Zenoh gets: those given, or loopback with an OS-chosen port.
+    /// The listen endpoints Zenoh gets: those given, or loopback with an OS-chosen port (a
+    /// client listens on nothing).
     fn listen_endpoints(&self) -> Vec<String> {
-        if self.listen.is_empty() {
+        if self.listen.is_empty() && self.mode == SessionMode::Client {
+            Vec::new()
+        } else if self.listen.is_empty() {
             let scheme = if self.is_tls() { "tls" } else { "tcp" };
             vec![format!("{scheme}/127.0.0.1:0")]
         } else {
@@ -319,7 +354,9 @@ impl SessionArgs {
                     });
                 }
             }
-            if endpoints.is_empty() {
+            // A client's empty listen list is written out: Zenoh's own default listens on
+            // every interface in peer and router mode.
+            if endpoints.is_empty() && !(field == "listen" && self.mode == SessionMode::Client) {
                 continue;
             }
             let value = serde_json::to_string(endpoints).map_err(|e| SessionError::Config {
@@ -335,6 +372,14 @@ impl SessionArgs {
                     reason: e.to_string(),
                 })?;
         }
+        let mode = format!("\"{}\"", self.mode.as_str());
+        config
+            .insert_json5("mode", &mode)
+            .map_err(|e| SessionError::Config {
+                field: "mode",
+                value: mode.clone(),
+                reason: e.to_string(),
+            })?;
         let multicast = if self.multicast_scouting {
             "true"
         } else {
@@ -412,6 +457,34 @@ impl SessionArgs {
                 })?;
         }
         Ok(())
+    }
+
+    /// The configuration of a Zenoh router with these settings ([`Self::config`] in router
+    /// mode): it forwards between every session connected to it, so processes on networks that
+    /// cannot reach each other meet through it (docs/deploy.md).
+    ///
+    /// # Errors
+    /// As [`Self::config`].
+    pub fn router_config(&self) -> Result<zenoh::Config, SessionError> {
+        let mut config = self.config()?;
+        config
+            .insert_json5("mode", "\"router\"")
+            .map_err(|e| SessionError::Config {
+                field: "mode",
+                value: "router".into(),
+                reason: e.to_string(),
+            })?;
+        Ok(config)
+    }
+
+    /// Opens a Zenoh router ([`Self::router_config`]).
+    ///
+    /// # Errors
+    /// As [`Self::open`].
+    pub async fn open_router(&self) -> Result<Session, SessionError> {
+        zenoh::open(self.router_config()?)
+            .await
+            .map_err(SessionError::Open)
     }
 
     /// Opens the session.
@@ -521,6 +594,29 @@ mod session_args_tests {
             json(&on.config().unwrap(), "scouting/multicast/enabled"),
             serde_json::Value::Bool(true)
         );
+    }
+
+    /// A client behind a router listens on nothing and says it is a client; the router
+    /// configuration is the same settings in router mode; a file's `mode` reads as text.
+    #[test]
+    fn client_and_router_modes() {
+        let peer = SessionArgs::default().config().unwrap();
+        assert_eq!(json(&peer, "mode"), serde_json::json!("peer"));
+        let client = SessionArgs {
+            connect: vec!["tcp/10.0.0.1:7447".into()],
+            mode: SessionMode::Client,
+            ..SessionArgs::default()
+        };
+        let config = client.config().unwrap();
+        assert_eq!(json(&config, "mode"), serde_json::json!("client"));
+        assert_eq!(json(&config, "listen/endpoints"), serde_json::json!([]));
+        let router = SessionArgs::new(&["tcp/0.0.0.0:7447".into()], &[])
+            .router_config()
+            .unwrap();
+        assert_eq!(json(&router, "mode"), serde_json::json!("router"));
+        let parsed: SessionArgs = serde_json::from_str(r#"{"mode": "client"}"#).unwrap();
+        assert_eq!(parsed.mode, SessionMode::Client);
+        assert!(serde_json::from_str::<SessionArgs>(r#"{"mode": "router"}"#).is_err());
     }
 
     #[test]

@@ -594,14 +594,7 @@ pub fn record(
                     s.spawn(move || {
                         #[allow(clippy::cast_possible_truncation)]
                         let scenario = (e % loaded.len() as u64) as usize;
-                        run_episode(
-                            &loaded[scenario],
-                            scenario,
-                            e,
-                            remaining,
-                            options,
-                            progress,
-                        )
+                        run_episode(&loaded[scenario], scenario, e, remaining, options, progress)
                     })
                 })
                 .collect();
