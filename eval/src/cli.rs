@@ -194,6 +194,10 @@ pub struct TableArgs {
     /// Also record the camera (JPEG) in the run logs.
     #[arg(long, requires = "record_dir")]
     record_camera: bool,
+    /// The intention pipeline keeps a robot's path while it holds (`[path_reuse]` on) instead
+    /// of a new search every cycle: the closed-loop check of issue 16's cheaper replanning.
+    #[arg(long)]
+    path_reuse: bool,
 }
 
 /// Arguments of `eval record`.
@@ -417,6 +421,14 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
         models_dir,
         record: record_settings(args.record_dir.as_deref(), args.record_camera),
         ..TableOptions::default()
+    };
+    let options = TableOptions {
+        intention: {
+            let mut intention = options.intention;
+            intention.reuse.enabled = args.path_reuse;
+            intention
+        },
+        ..options
     };
     options.validate(&methods)?;
     let seeds: Vec<u64> = (0..args.seeds).collect();

@@ -27,6 +27,10 @@ pub struct ReuseParams {
     pub corridor_yaw_rad: f64,
     /// A new search after this many reused answers in a row.
     pub max_cycles: u32,
+    /// The answered path goes from the robot straight to the kept path's pose this far along
+    /// it past the robot's nearest: a shallow merge like a new search's, not a sideways kink at
+    /// the robot (the LPE image draws it, and LPE-Net was trained on new searches' pictures).
+    pub rejoin_m: f64,
 }
 
 impl Default for ReuseParams {
@@ -36,6 +40,7 @@ impl Default for ReuseParams {
             corridor_m: 0.25,
             corridor_yaw_rad: 0.5,
             max_cycles: 20,
+            rejoin_m: 0.5,
         }
     }
 }
@@ -59,6 +64,13 @@ impl ReuseParams {
                 "reuse.corridor_yaw_rad",
                 self.corridor_yaw_rad,
                 "must be in (0, pi]",
+            ));
+        }
+        if !(self.rejoin_m.is_finite() && self.rejoin_m >= 0.0) {
+            return Err(PlanError::invalid_config(
+                "reuse.rejoin_m",
+                self.rejoin_m,
+                "must be zero or positive",
             ));
         }
         if self.max_cycles == 0 {
@@ -139,9 +151,15 @@ impl KeptPlan {
         }
         self.along = index;
         self.reused += 1;
-        let mut rest = Vec::with_capacity(self.poses.len() - index);
+        let mut rejoin = index + 1;
+        let mut ahead_m = self.poses[index].distance_m(&self.poses[rejoin]);
+        while ahead_m < params.rejoin_m && rejoin + 1 < self.poses.len() {
+            ahead_m += self.poses[rejoin].distance_m(&self.poses[rejoin + 1]);
+            rejoin += 1;
+        }
+        let mut rest = Vec::with_capacity(self.poses.len() - rejoin + 1);
         rest.push(robot);
-        rest.extend_from_slice(&self.poses[index + 1..]);
+        rest.extend_from_slice(&self.poses[rejoin..]);
         Some(rest)
     }
 }
