@@ -378,3 +378,32 @@ pub fn robot<'a>(robots: &'a Value, id: &str) -> Option<&'a Value> {
 pub fn state_kind(task: &Value) -> &str {
     task["state"]["kind"].as_str().unwrap_or("")
 }
+
+/// The state kinds a task document went through (its `history`), oldest first.
+#[must_use]
+pub fn history_kinds(task: &Value) -> Vec<&str> {
+    task["history"]
+        .as_array()
+        .map(|h| h.iter().map(state_kind).collect())
+        .unwrap_or_default()
+}
+
+/// Whether a task was paused, then active again, and ended completed.
+#[must_use]
+pub fn resumed_after_a_pause_and_completed(task: &Value) -> bool {
+    let kinds = history_kinds(task);
+    kinds
+        .iter()
+        .position(|k| *k == "paused")
+        .is_some_and(|at| kinds[at..].contains(&"active"))
+        && kinds.last() == Some(&"completed")
+}
+
+/// Where the service last saw robot `id` (x, y in metres), if it has a pose.
+///
+/// # Errors
+/// Transport failures or a non-2xx status.
+pub fn robot_xy(service: &Service, id: &str) -> Result<Option<(f64, f64)>> {
+    let r = service.get(&format!("/api/v1/robots/{id}"))?;
+    Ok(r["pose"]["x_m"].as_f64().zip(r["pose"]["y_m"].as_f64()))
+}

@@ -5,7 +5,10 @@
 
 use std::time::Duration;
 
-use fleet_tests::{bin_dir, child_pids, repo_root, robot, state_kind, Service};
+use fleet_tests::{
+    bin_dir, child_pids, history_kinds, repo_root, resumed_after_a_pause_and_completed, robot,
+    robot_xy, state_kind, Service,
+};
 use serde_json::{json, Value};
 
 const TOKEN: &str = "demo-test-token-0123456789abcdef";
@@ -94,22 +97,12 @@ fn a_killed_agent_is_restarted_and_its_task_resumes_and_completes() {
     let second = agent_pid(&demo, "robot_1").expect("a new agent for robot_1");
     assert_ne!(first, second);
     let done = wait_state("completed", 180);
-    let kinds: Vec<&str> = done["history"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(state_kind)
-        .collect();
-    let paused_at = kinds.iter().position(|k| *k == "paused").unwrap();
     assert!(
-        kinds[paused_at..].contains(&"active") && kinds.last() == Some(&"completed"),
-        "{kinds:?}"
+        resumed_after_a_pause_and_completed(&done),
+        "{:?}",
+        history_kinds(&done)
     );
-    let end = demo.get("/api/v1/robots/robot_1").unwrap();
-    let (x, y) = (
-        end["pose"]["x_m"].as_f64().unwrap(),
-        end["pose"]["y_m"].as_f64().unwrap(),
-    );
+    let (x, y) = robot_xy(&demo, "robot_1").unwrap().unwrap();
     assert!(
         (x - 9.0).hypot(y - 4.0) < 0.6,
         "robot_1 ended at ({x}, {y})"

@@ -11,7 +11,8 @@ use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use fleet_tests::{
-    bin_dir, free_port, repo_root, robot, start_robots, state_kind, Robots, Service,
+    bin_dir, free_port, history_kinds, repo_root, robot, robot_xy, start_robots, state_kind,
+    Robots, Service,
 };
 use protocol::ControllerKind;
 use serde_json::{json, Value};
@@ -100,11 +101,7 @@ fn wait_task(service: &Service, id: &str, kind: &str, timeout: Duration) -> Valu
 }
 
 fn pose_of(service: &Service, id: &str) -> (f64, f64) {
-    let r = service.get(&format!("/api/v1/robots/{id}")).unwrap();
-    (
-        r["pose"]["x_m"].as_f64().unwrap(),
-        r["pose"]["y_m"].as_f64().unwrap(),
-    )
+    robot_xy(service, id).unwrap().unwrap()
 }
 
 fn moved_m(a: (f64, f64), b: (f64, f64)) -> f64 {
@@ -153,12 +150,7 @@ fn a_two_goal_task_is_driven_to_completion_and_a_cancelled_robot_stops() {
     assert_eq!(status, 409, "{again}");
 
     let done = wait_task(s, &task, "completed", Duration::from_secs(180));
-    let kinds: Vec<&str> = done["history"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(state_kind)
-        .collect();
+    let kinds = history_kinds(&done);
     assert!(
         kinds.contains(&"active") && kinds.last() == Some(&"completed"),
         "{kinds:?}"

@@ -15,7 +15,8 @@ use std::process::Command;
 use std::time::Duration;
 
 use fleet_tests::{
-    bin_dir, free_port, repo_root, robot, state_kind, Process, Robots, RobotsSpec, Service,
+    bin_dir, free_port, history_kinds, repo_root, resumed_after_a_pause_and_completed, robot,
+    robot_xy, state_kind, Process, Robots, RobotsSpec, Service,
 };
 use protocol::MapName;
 use serde_json::{json, Value};
@@ -251,22 +252,12 @@ fn robots_and_service_on_two_networks_meet_through_a_router_and_ride_out_a_cut_l
     robots_ns.set_link(true);
     wait_state("active", 60);
     let done = wait_state("completed", 180);
-    let kinds: Vec<&str> = done["history"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(state_kind)
-        .collect();
-    let paused_at = kinds.iter().position(|k| *k == "paused").unwrap();
     assert!(
-        kinds[paused_at..].contains(&"active") && kinds.last() == Some(&"completed"),
-        "{kinds:?}"
+        resumed_after_a_pause_and_completed(&done),
+        "{:?}",
+        history_kinds(&done)
     );
-    let end = service.get("/api/v1/robots/robot_1").unwrap();
-    let (x, y) = (
-        end["pose"]["x_m"].as_f64().unwrap(),
-        end["pose"]["y_m"].as_f64().unwrap(),
-    );
+    let (x, y) = robot_xy(&service, "robot_1").unwrap().unwrap();
     assert!(
         (x - 9.0).hypot(y - 4.0) < 0.6,
         "robot_1 ended at ({x}, {y})"
