@@ -379,6 +379,37 @@ pub fn state_kind(task: &Value) -> &str {
     task["state"]["kind"].as_str().unwrap_or("")
 }
 
+/// Waits (up to 90 s) until `robot_id` is online with a pose, then gives it a one-goal task to
+/// `goal` (x, y in metres) on `map`; the task's id.
+///
+/// # Errors
+/// [`HarnessError::Timeout`] when the robot never shows up, HTTP failures, or a task the
+/// service refuses.
+pub fn task_once_online(
+    service: &Service,
+    robot_id: &str,
+    map: &str,
+    goal: (f64, f64),
+) -> Result<String> {
+    service.wait_for("/api/v1/robots", Duration::from_secs(90), |v| {
+        robot(v, robot_id)
+            .and_then(|r| (r["online"] == true && r["pose"].is_object()).then_some(()))
+    })?;
+    let body = serde_json::json!({
+        "map": map,
+        "robot_id": robot_id,
+        "goals": [{"x_m": goal.0, "y_m": goal.1}],
+    });
+    let (status, task) = service.post("/api/v1/tasks", &body)?;
+    match task["id"].as_str() {
+        Some(id) if status == 201 => Ok(id.to_string()),
+        _ => Err(HarnessError::Http {
+            what: "/api/v1/tasks".into(),
+            reason: format!("{status}: {task}"),
+        }),
+    }
+}
+
 /// The state kinds a task document went through (its `history`), oldest first.
 #[must_use]
 pub fn history_kinds(task: &Value) -> Vec<&str> {

@@ -6,10 +6,10 @@
 use std::time::Duration;
 
 use fleet_tests::{
-    bin_dir, child_pids, history_kinds, repo_root, resumed_after_a_pause_and_completed, robot,
-    robot_xy, state_kind, Service,
+    bin_dir, child_pids, history_kinds, repo_root, resumed_after_a_pause_and_completed, robot_xy,
+    state_kind, Service,
 };
-use serde_json::{json, Value};
+use serde_json::Value;
 
 const TOKEN: &str = "demo-test-token-0123456789abcdef";
 
@@ -19,22 +19,9 @@ fn agent_pid(demo: &Service, robot_id: &str) -> Option<u32> {
         .copied()
 }
 
-/// Waits for robot_1 to be online with a pose, then gives it a task across the junctions map;
-/// the task's id.
+/// robot_1's task across the junctions map, once it is online.
 fn task_once_online(demo: &Service) -> String {
-    demo.wait_for("/api/v1/robots", Duration::from_secs(90), |v| {
-        robot(v, "robot_1")
-            .and_then(|r| (r["online"] == true && r["pose"].is_object()).then_some(()))
-    })
-    .unwrap();
-    let (status, task) = demo
-        .post(
-            "/api/v1/tasks",
-            &json!({"map": "junctions", "robot_id": "robot_1", "goals": [{"x_m": 9.0, "y_m": 4.0}]}),
-        )
-        .unwrap();
-    assert_eq!(status, 201, "{task}");
-    task["id"].as_str().unwrap().to_string()
+    fleet_tests::task_once_online(demo, "robot_1", "junctions", (9.0, 4.0)).unwrap()
 }
 
 #[test]

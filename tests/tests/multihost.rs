@@ -15,11 +15,11 @@ use std::process::Command;
 use std::time::Duration;
 
 use fleet_tests::{
-    bin_dir, free_port, history_kinds, repo_root, resumed_after_a_pause_and_completed, robot,
-    robot_xy, state_kind, Process, Robots, RobotsSpec, Service,
+    bin_dir, free_port, history_kinds, repo_root, resumed_after_a_pause_and_completed, robot_xy,
+    state_kind, task_once_online, Process, Robots, RobotsSpec, Service,
 };
 use protocol::MapName;
-use serde_json::{json, Value};
+use serde_json::Value;
 
 const TOKEN: &str = "multihost-test-token-0123456789abcdef";
 
@@ -205,20 +205,8 @@ fn robots_and_service_on_two_networks_meet_through_a_router_and_ride_out_a_cut_l
     );
     let robots = Robots::start(&spec).unwrap();
 
-    service
-        .wait_for("/api/v1/robots", Duration::from_secs(90), |v| {
-            robot(v, "robot_1")
-                .and_then(|r| (r["online"] == true && r["pose"].is_object()).then_some(()))
-        })
-        .unwrap();
-    let (status, task) = service
-        .post(
-            "/api/v1/tasks",
-            &json!({"map": "junctions", "robot_id": "robot_1", "goals": [{"x_m": 9.0, "y_m": 4.0}]}),
-        )
-        .unwrap();
-    assert_eq!(status, 201, "{task}");
-    let task_path = format!("/api/v1/tasks/{}", task["id"].as_str().unwrap());
+    let id = task_once_online(&service, "robot_1", "junctions", (9.0, 4.0)).unwrap();
+    let task_path = format!("/api/v1/tasks/{id}");
     let wait_state = |kind: &str, secs: u64| -> Value {
         service
             .wait_for(&task_path, Duration::from_secs(secs), |t| {
