@@ -50,6 +50,10 @@ pub enum Command {
     /// A Zenoh router: forwards between the sessions connected to it, so robots and the
     /// service on networks that cannot reach each other meet through it (docs/deploy.md).
     Router(RouterArgs),
+    /// A replanning worker: joins the site over Zenoh and replans the robots that rendezvous
+    /// hashing over the live workers gives it, while the service keeps the task book
+    /// (docs/deploy.md).
+    Worker(WorkerArgs),
     /// The robots' side of `bench-fleet` (started by it).
     #[command(hide = true)]
     BenchRobots(BenchRobotsArgs),
@@ -171,12 +175,39 @@ pub struct BenchFleetArgs {
     /// once: a start-up burst, not the fleet at work).
     #[arg(long, default_value_t = 3.0)]
     pub warmup_s: f64,
+    /// Replan in this many worker processes (`planner-service worker`) instead of the service.
+    #[arg(long, default_value_t = 0)]
+    pub workers: usize,
+    /// Pin worker k to CPU core k (`taskset`), so each worker has one core.
+    #[arg(long)]
+    pub pin_workers: bool,
 }
 
 #[derive(Debug, Args)]
 pub struct RouterArgs {
     /// The endpoints to listen on (`--zenoh-listen`, repeatable; e.g. tcp/0.0.0.0:7447), other
     /// routers to connect to, and the site's TLS and access-control files.
+    #[command(flatten)]
+    pub zenoh: SessionArgs,
+}
+
+#[derive(Debug, Args)]
+pub struct WorkerArgs {
+    /// This worker's id, unique on the site (its liveliness token and metrics label).
+    /// Default: `<host name>-<process id>`.
+    #[arg(long)]
+    pub worker_id: Option<protocol::WorkerId>,
+    /// Configuration file (TOML; see planner.example.toml): the `[planner]`, `[dlm]`, `[lpe]`,
+    /// `[path_reuse]` and `[fleet]` tables the service uses, and `[zenoh]`.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Site: Zenoh keys are under fleet/<site>/. Default: `[zenoh] site`.
+    #[arg(long)]
+    pub site: Option<SiteId>,
+    /// How long a cycle waits for the service's answer (and a map fetch for the map store's).
+    #[arg(long, default_value_t = 2000)]
+    pub query_timeout_ms: u64,
+    /// The Zenoh session: `--zenoh-connect` the service's endpoint or a router.
     #[command(flatten)]
     pub zenoh: SessionArgs,
 }
@@ -316,6 +347,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> anyhow::Result<()> {
         Command::BenchFleet(args) => bench_fleet(&args, out),
         Command::BenchRobots(args) => bench_robots(&args, out),
         Command::Router(args) => router(&args, out),
+        Command::Worker(args) => worker(&args, out),
         Command::BenchStore(args) => bench_store(&args, out),
         Command::Certs(args) => certs(&args, out),
     }
@@ -401,6 +433,8 @@ fn bench_fleet(args: &BenchFleetArgs, out: &mut dyn Write) -> anyhow::Result<()>
         seed: args.seed,
         config: load_config(args.config.as_deref())?,
         path_reuse: args.path_reuse,
+        workers: args.workers,
+        pin_workers: args.pin_workers,
         robots_exe: std::env::current_exe().context("cannot find this executable")?,
     };
     let bar = ProgressBar::new(0).with_style(
@@ -440,6 +474,81 @@ fn router(args: &RouterArgs, out: &mut dyn Write) -> anyhow::Result<()> {
             .map_err(|e| anyhow::anyhow!("closing the router: {e}"))?;
         Ok(())
     })
+}
+
+/// The line a worker prints once it has joined the site (tests and launchers wait for it).
+pub const WORKER_READY_PREFIX: &str = "worker ready: ";
+
+fn worker(args: &WorkerArgs, out: &mut dyn Write) -> anyhow::Result<()> {
+    use crate::fleet::remote::{WorkerNode, WorkerOptions};
+    let mut config = load_config(args.config.as_deref())?;
+    if let Some(site) = &args.site {
+        config.zenoh.site = site.clone();
+    }
+    config.zenoh.override_with(&args.zenoh);
+    config
+        .validate()
+        .map_err(|reason| anyhow::anyhow!("invalid settings: {reason}"))?;
+    if args.query_timeout_ms == 0 {
+        anyhow::bail!("invalid --query-timeout-ms = 0: must be positive");
+    }
+    let id = match &args.worker_id {
+        Some(id) => id.clone(),
+        None => default_worker_id()?,
+    };
+    runtime()?.block_on(async {
+        let stop = StopSignal::install().context("cannot listen for SIGTERM")?;
+        let session = config
+            .zenoh
+            .session_args()
+            .open()
+            .await
+            .context("cannot open the Zenoh session")?;
+        let options = WorkerOptions {
+            id: id.clone(),
+            site: config.zenoh.site.clone(),
+            query_timeout: std::time::Duration::from_millis(args.query_timeout_ms),
+            config,
+        };
+        let node = WorkerNode::start(session.clone(), options)
+            .await
+            .context("cannot join the site")?;
+        writeln!(
+            out,
+            "{WORKER_READY_PREFIX}{id} (zenoh: {})",
+            protocol::zenoh_io::locators(&session).await.join(" ")
+        )?;
+        out.flush()?;
+        stop.wait().await.context("cannot listen for Ctrl-C")?;
+        writeln!(out, "stopping after {} cycles", node.cycles())?;
+        out.flush()?;
+        node.shutdown().await;
+        session
+            .close()
+            .await
+            .map_err(|e| anyhow::anyhow!("closing the Zenoh session: {e}"))?;
+        Ok(())
+    })
+}
+
+fn default_worker_id() -> anyhow::Result<protocol::WorkerId> {
+    let host = std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .or_else(|_| std::env::var("HOSTNAME"))
+        .unwrap_or_else(|_| "worker".into());
+    // Host names may hold characters ids do not: keep the allowed ones.
+    let host: String = host
+        .trim()
+        .chars()
+        .filter(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-'))
+        .take(40)
+        .collect();
+    let host = if host.is_empty() {
+        "worker".into()
+    } else {
+        host
+    };
+    protocol::WorkerId::new(format!("{host}-{}", std::process::id()))
+        .context("cannot make a worker id from the host name; pass --worker-id")
 }
 
 fn bench_robots(args: &BenchRobotsArgs, out: &mut dyn Write) -> anyhow::Result<()> {

@@ -53,7 +53,12 @@ pub struct FleetBenchOptions {
     /// Measure with `[path_reuse]` on (and full replanning as the reference in the same run);
     /// off: the configuration's setting, measured alone.
     pub path_reuse: bool,
-    /// The `planner-service` executable that runs `bench-robots`.
+    /// Worker processes (`planner-service worker`) that do the replanning; 0: the service
+    /// plans itself.
+    pub workers: usize,
+    /// Pin worker `k` to CPU core `k mod cores` (`taskset`).
+    pub pin_workers: bool,
+    /// The `planner-service` executable that runs `bench-robots` and the workers.
     pub robots_exe: PathBuf,
 }
 
@@ -79,6 +84,8 @@ pub struct ModeFigures {
     pub kept_plan_answers: u64,
     pub tasks_created: u64,
     pub tasks_completed: u64,
+    /// Who replanned: the service and each worker process, with their replans and latency.
+    pub workers: Vec<crate::fleet::WorkerView>,
 }
 
 /// The results (JSON) of one benchmark.
@@ -89,6 +96,9 @@ pub struct FleetBenchReport {
     pub map: String,
     pub robots: usize,
     pub rate_hz: f64,
+    /// Worker processes that replanned (0: the service itself).
+    pub workers: usize,
+    pub pin_workers: bool,
     /// Seconds of load before each measured run (not counted).
     pub warmup_s: f64,
     /// The measured mode's headline figures (as in `measured`).
@@ -286,6 +296,8 @@ pub async fn run_fleet_bench(
         map: opts.map_yaml.display().to_string(),
         robots: opts.robots,
         rate_hz: opts.rate_hz,
+        workers: opts.workers,
+        pin_workers: opts.pin_workers,
         warmup_s: opts.warmup_s,
         path_reuse: measured.path_reuse,
         answered_fraction: measured.answered_fraction,
@@ -329,9 +341,26 @@ async fn run_mode(
             "the benchmark's Zenoh session listens on no endpoint",
         ));
     }
-    let fleet = Fleet::start(session, plan.site.clone(), Arc::clone(store), dir, config)
+    let fleet = Fleet::start(
+        session.clone(),
+        plan.site.clone(),
+        Arc::clone(store),
+        dir,
+        config.clone(),
+    )
+    .await
+    .map_err(setup)?;
+    // Workers fetch the map from the map store over Zenoh, as on a real site.
+    let map_server = map_store::MapServer::start(&session, &plan.site, Arc::clone(store))
         .await
         .map_err(setup)?;
+    let workers = match start_workers(opts, &config, dir, &endpoints, &fleet).await {
+        Ok(w) => w,
+        Err(e) => {
+            fleet.shutdown().await;
+            return Err(e);
+        }
+    };
     let result = drive(
         opts,
         &fleet,
@@ -372,12 +401,86 @@ async fn run_mode(
                 kept_plan_answers: metrics.replans_reused_total(),
                 tasks_created,
                 tasks_completed: completed as u64,
+                workers: fleet.workers(),
             })
         }
         Err(e) => Err(e),
     };
+    for mut w in workers {
+        w.request_stop();
+        w.wait_or_kill(Instant::now() + Duration::from_secs(5));
+    }
+    drop(map_server);
     fleet.shutdown().await;
     figures
+}
+
+/// Starts `opts.workers` worker processes on the benchmark's session and waits until the
+/// service counts them all alive.
+async fn start_workers(
+    opts: &FleetBenchOptions,
+    config: &ServiceConfig,
+    dir: &Path,
+    endpoints: &[String],
+    fleet: &Arc<Fleet>,
+) -> Result<Vec<Process>, FleetBenchError> {
+    if opts.workers == 0 {
+        return Ok(Vec::new());
+    }
+    let config_file = dir.join("worker.toml");
+    std::fs::write(&config_file, toml::to_string(config).map_err(setup)?).map_err(setup)?;
+    let cores = std::thread::available_parallelism().map_or(1, std::num::NonZero::get);
+    let mut procs = Vec::new();
+    for k in 0..opts.workers {
+        let mut cmd = if opts.pin_workers {
+            let mut c = Command::new("taskset");
+            c.args(["-c", &(k % cores).to_string()])
+                .arg(&opts.robots_exe);
+            c
+        } else {
+            Command::new(&opts.robots_exe)
+        };
+        cmd.arg("worker")
+            .args(["--worker-id", &format!("bench-w{k}")])
+            .arg("--config")
+            .arg(&config_file)
+            .env("RUST_LOG", "warn");
+        for e in endpoints {
+            cmd.arg("--zenoh-connect").arg(e);
+        }
+        procs.push(Process::spawn("worker", cmd).map_err(setup)?);
+    }
+    let mut ready = Vec::new();
+    for mut p in procs {
+        let p = tokio::task::spawn_blocking(move || {
+            p.wait_line(Duration::from_secs(30), |l| {
+                l.starts_with(crate::cli::WORKER_READY_PREFIX).then_some(())
+            })
+            .map(|()| p)
+        })
+        .await
+        .map_err(setup)?
+        .map_err(setup)?;
+        ready.push(p);
+    }
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        let alive = fleet
+            .workers()
+            .iter()
+            .filter(|w| w.alive && w.id != crate::fleet::metrics::SERVICE_WORKER)
+            .count();
+        if alive == opts.workers {
+            return Ok(ready);
+        }
+        if Instant::now() > deadline {
+            return Err(setup(format!(
+                "the service sees {alive} of {} workers after 10 s",
+                opts.workers
+            )));
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
 }
 
 /// Starts the robots' process, feeds tasks until it reports; what it measured and the tasks
@@ -717,8 +820,8 @@ fn reference_replans(
 #[must_use]
 pub fn markdown(r: &FleetBenchReport) -> String {
     let mut out = String::from(
-        "| robots | rate | replanning | poses sent | answered | replans/s | kept-plan answers | latency mean | p50 | p99 | max | tasks done |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| robots | rate | workers | replanning | poses sent | answered | replans/s | kept-plan answers | latency mean | p50 | p99 | max | tasks done |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for m in std::iter::once(&r.measured).chain(r.full_replanning.as_ref()) {
         #[allow(clippy::cast_precision_loss)]
@@ -728,9 +831,14 @@ pub fn markdown(r: &FleetBenchReport) -> String {
             100.0 * m.kept_plan_answers as f64 / m.replans as f64
         };
         out.push_str(&format!(
-            "| {} | {:.0} Hz | {} | {} | {:.1} % | {:.0} | {kept:.1} % | {:.2} ms | {:.2} ms | {:.2} ms | {:.2} ms | {} |\n",
+            "| {} | {:.0} Hz | {} | {} | {} | {:.1} % | {:.0} | {kept:.1} % | {:.2} ms | {:.2} ms | {:.2} ms | {:.2} ms | {} |\n",
             r.robots,
             r.rate_hz,
+            match (r.workers, r.pin_workers) {
+                (0, _) => "service".to_string(),
+                (w, true) => format!("{w} (pinned)"),
+                (w, false) => w.to_string(),
+            },
             if m.path_reuse { "path reuse" } else { "full" },
             m.poses_sent,
             m.answered_fraction * 100.0,

@@ -203,6 +203,12 @@ define_id!(
     "task_id",
     MAX_ID_LEN
 );
+define_id!(
+    /// A replanning worker process (`planner-service worker`).
+    WorkerId,
+    "worker_id",
+    MAX_ID_LEN
+);
 
 impl SiteId {
     /// The site every process uses when none is configured.

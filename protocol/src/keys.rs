@@ -7,13 +7,17 @@
 
 use zenoh::key_expr::OwnedKeyExpr;
 
-use crate::ids::{MapName, RobotId, SiteId, TaskId};
+use crate::ids::{MapName, RobotId, SiteId, TaskId, WorkerId};
 
 /// First chunk of every fleet key.
 pub const ROOT: &str = "fleet";
 const ROBOT: &str = "robot";
 const MAP: &str = "map";
 const TASK: &str = "task";
+const WORKER: &str = "worker";
+const CYCLE: &str = "cycle";
+const ALIVE: &str = "alive";
+const OUTCOME: &str = "outcome";
 
 /// The per-robot topics.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -133,6 +137,37 @@ pub fn all_tasks(site: &SiteId) -> OwnedKeyExpr {
     join(&[ROOT, site.as_str(), TASK, "*"])
 }
 
+/// `fleet/<site>/worker/<worker_id>/alive`: a replanning worker's liveliness token.
+pub fn worker_alive(site: &SiteId, worker: &WorkerId) -> OwnedKeyExpr {
+    join(&[ROOT, site.as_str(), WORKER, worker.as_str(), ALIVE])
+}
+
+/// `fleet/<site>/worker/*/alive`: the liveliness tokens of every worker.
+pub fn workers_alive(site: &SiteId) -> OwnedKeyExpr {
+    join(&[ROOT, site.as_str(), WORKER, "*", ALIVE])
+}
+
+/// `fleet/<site>/cycle/<robot_id>`: a worker's query for what a robot's replanning cycle is
+/// to do (the service's task book answers).
+pub fn cycle(site: &SiteId, robot_id: &RobotId) -> OwnedKeyExpr {
+    join(&[ROOT, site.as_str(), CYCLE, robot_id.as_str()])
+}
+
+/// `fleet/<site>/cycle/*`: what the service declares its cycle queryable on.
+pub fn cycle_queryable(site: &SiteId) -> OwnedKeyExpr {
+    join(&[ROOT, site.as_str(), CYCLE, "*"])
+}
+
+/// `fleet/<site>/cycle/<robot_id>/outcome`: how a worker's cycle for a robot ended.
+pub fn cycle_outcome(site: &SiteId, robot_id: &RobotId) -> OwnedKeyExpr {
+    join(&[ROOT, site.as_str(), CYCLE, robot_id.as_str(), OUTCOME])
+}
+
+/// `fleet/<site>/cycle/*/outcome`: every robot's cycle outcomes.
+pub fn all_cycle_outcomes(site: &SiteId) -> OwnedKeyExpr {
+    join(&[ROOT, site.as_str(), CYCLE, "*", OUTCOME])
+}
+
 /// `fleet/<site>/**`: everything of a site (router rules, recording, debugging).
 pub fn site_all(site: &SiteId) -> OwnedKeyExpr {
     join(&[ROOT, site.as_str(), "**"])
@@ -187,6 +222,28 @@ pub fn parse_task_key(key: &str) -> Option<(SiteId, TaskId)> {
     }
 }
 
+/// Parses `fleet/<site>/worker/<worker_id>/alive`.
+pub fn parse_worker_alive_key(key: &str) -> Option<(SiteId, WorkerId)> {
+    let (site, rest) = split_site(key, WORKER)?;
+    match rest.as_slice() {
+        [worker_id, alive] if *alive == ALIVE => Some((site, WorkerId::new(*worker_id).ok()?)),
+        _ => None,
+    }
+}
+
+/// Parses `fleet/<site>/cycle/<robot_id>` (`false`) or `fleet/<site>/cycle/<robot_id>/outcome`
+/// (`true`).
+pub fn parse_cycle_key(key: &str) -> Option<(SiteId, RobotId, bool)> {
+    let (site, rest) = split_site(key, CYCLE)?;
+    match rest.as_slice() {
+        [robot_id] => Some((site, RobotId::new(*robot_id).ok()?, false)),
+        [robot_id, outcome] if *outcome == OUTCOME => {
+            Some((site, RobotId::new(*robot_id).ok()?, true))
+        }
+        _ => None,
+    }
+}
+
 /// Only canonical decimal (no sign, no leading zeros), so that parse and build round-trip.
 fn parse_version(chunk: &str) -> Option<u32> {
     let canonical = chunk.bytes().all(|b| b.is_ascii_digit())
@@ -207,6 +264,29 @@ mod tests {
 
     fn site() -> SiteId {
         SiteId::new("hq").unwrap()
+    }
+
+    #[test]
+    fn worker_and_cycle_keys_round_trip_and_stay_apart() {
+        let w = WorkerId::new("w-1").unwrap();
+        let r = RobotId::new("robot_1").unwrap();
+        let alive = worker_alive(&site(), &w);
+        assert_eq!(alive.as_str(), "fleet/hq/worker/w-1/alive");
+        assert!(workers_alive(&site()).intersects(&alive));
+        assert_eq!(parse_worker_alive_key(&alive), Some((site(), w)));
+        let query = cycle(&site(), &r);
+        let outcome = cycle_outcome(&site(), &r);
+        assert_eq!(query.as_str(), "fleet/hq/cycle/robot_1");
+        assert_eq!(outcome.as_str(), "fleet/hq/cycle/robot_1/outcome");
+        assert_eq!(parse_cycle_key(&query), Some((site(), r.clone(), false)));
+        assert_eq!(parse_cycle_key(&outcome), Some((site(), r, true)));
+        // The queryable never sees outcomes, the outcome subscriber never sees queries.
+        assert!(cycle_queryable(&site()).intersects(&query));
+        assert!(!cycle_queryable(&site()).intersects(&outcome));
+        assert!(all_cycle_outcomes(&site()).intersects(&outcome));
+        assert!(!all_cycle_outcomes(&site()).intersects(&query));
+        assert_eq!(parse_cycle_key("fleet/hq/cycle/robot_1/other"), None);
+        assert_eq!(parse_worker_alive_key("fleet/hq/worker/w-1/other"), None);
     }
 
     #[test]

@@ -22,6 +22,9 @@
 //! | `fleet/<site>/map/<name>` | queryable: latest [`MapGrid`] / [`MapMeta`] | map store → agents |
 //! | `fleet/<site>/map/<name>/<version>` | queryable: that version | map store → agents |
 //! | `fleet/<site>/task/<task_id>` | [`TaskEvent`] (JSON) | planner → dashboard, eval |
+//! | `fleet/<site>/worker/<worker_id>/alive` | liveliness token | worker → planner, workers |
+//! | `fleet/<site>/cycle/<robot_id>` | queryable: what a replanning cycle is to do | worker → planner |
+//! | `fleet/<site>/cycle/<robot_id>/outcome` | how that cycle ended | worker → planner |
 //!
 //! Wildcards: [`keys::all_robots`] (`fleet/<site>/robot/*/<topic>`), [`keys::alive_all`],
 //! [`keys::map_queryable`] (`fleet/<site>/map/**`), [`keys::all_tasks`], [`keys::site_all`].
@@ -81,7 +84,7 @@ pub mod telemetry;
 pub mod zenoh_io;
 
 pub use codec::{decode, encode, DecodeError, EncodeError, WireMessage, WIRE_VERSION};
-pub use ids::{IdError, IdRejection, MapId, MapName, RobotId, SiteId, TaskId};
+pub use ids::{IdError, IdRejection, MapId, MapName, RobotId, SiteId, TaskId, WorkerId};
 pub use keys::RobotTopic;
 pub use lpe::{LpeParams, LpeParamsError};
 pub use messages::{

@@ -6,7 +6,8 @@
 //!
 //! | identity (common name) | may publish | may read |
 //! |---|---|---|
-//! | `planner` | intentions, task events, map replies | poses, status, cameras, liveliness, maps |
+//! | `planner` | intentions, task events, map replies, cycle replies | poses, status, cameras, liveliness, maps, cycle outcomes |
+//! | `worker` (every `planner-service worker`) | intentions, cycle queries and outcomes, its liveliness | poses, workers' liveliness, maps |
 //! | `map-store` | map replies | – |
 //! | `sim` (the robots' drivers) | scans, odometry, cameras of every robot | velocity commands |
 //! | `agent.<robot_id>` | that robot's pose, status, velocity command, liveliness | that robot's sensors and intention, maps |
@@ -54,6 +55,8 @@ pub enum Identity {
     Observer,
     /// A Zenoh router between hosts; it checks the rules on its own ingress.
     Router,
+    /// A replanning worker (`planner-service worker`); the site's workers share it.
+    Worker,
     /// The agent of one robot.
     Agent(RobotId),
 }
@@ -63,12 +66,13 @@ const AGENT_PREFIX: &str = "agent.";
 
 impl Identity {
     /// The identities every site has, besides one agent per robot.
-    pub const SERVICES: [Identity; 5] = [
+    pub const SERVICES: [Identity; 6] = [
         Identity::Planner,
         Identity::MapStore,
         Identity::Sim,
         Identity::Observer,
         Identity::Router,
+        Identity::Worker,
     ];
 
     /// The certificate's common name, which the access-control rules match.
@@ -80,6 +84,7 @@ impl Identity {
             Identity::Sim => "sim".into(),
             Identity::Observer => "observer".into(),
             Identity::Router => "router".into(),
+            Identity::Worker => "worker".into(),
             Identity::Agent(robot) => format!("{AGENT_PREFIX}{robot}"),
         }
     }
@@ -117,11 +122,31 @@ impl Identity {
                         every(RobotTopic::Pose),
                         every(RobotTopic::Status),
                         every(RobotTopic::Camera),
+                        keys::all_cycle_outcomes(site),
                     ],
                 ),
-                (WATCH_LIVELINESS, vec![keys::alive_all(site)]),
-                (SERVE, maps()),
+                (
+                    WATCH_LIVELINESS,
+                    vec![keys::alive_all(site), keys::workers_alive(site)],
+                ),
+                (
+                    SERVE,
+                    vec![keys::map_queryable(site), keys::cycle_queryable(site)],
+                ),
                 (QUERY, maps()),
+            ],
+            Identity::Worker => vec![
+                (
+                    PUBLISH,
+                    vec![every(RobotTopic::Intention), keys::all_cycle_outcomes(site)],
+                ),
+                (SUBSCRIBE, vec![every(RobotTopic::Pose)]),
+                (WATCH_LIVELINESS, vec![keys::workers_alive(site)]),
+                (TOKEN, vec![keys::workers_alive(site)]),
+                (
+                    QUERY,
+                    vec![keys::map_queryable(site), keys::cycle_queryable(site)],
+                ),
             ],
             Identity::MapStore => vec![(SERVE, maps())],
             Identity::Sim => vec![
@@ -679,7 +704,7 @@ mod tests {
         let r1 = RobotId::new("r1").unwrap();
         let first = issue(&files, &site(), std::slice::from_ref(&r1), &[]).unwrap();
         assert!(first.new_ca);
-        assert_eq!(first.issued.len(), 6);
+        assert_eq!(first.issued.len(), Identity::SERVICES.len() + 1);
         // The router's configuration is one Zenoh accepts.
         let router = std::fs::read_to_string(files.router_config()).unwrap();
         let config = zenoh::Config::from_json5(&router).unwrap();

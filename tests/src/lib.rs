@@ -438,3 +438,60 @@ pub fn robot_xy(service: &Service, id: &str) -> Result<Option<(f64, f64)>> {
     let r = service.get(&format!("/api/v1/robots/{id}"))?;
     Ok(r["pose"]["x_m"].as_f64().zip(r["pose"]["y_m"].as_f64()))
 }
+
+/// Starts `planner-service worker --worker-id id` connected to `zenoh` (with `extra` flags
+/// before it, e.g. `--zenoh-mode client`) and waits until it has joined the site.
+///
+/// # Errors
+/// [`LaunchError`] when it cannot start or does not say it is ready within 60 s.
+pub fn start_worker(command: Command, id: &str, zenoh: &str, extra: &[&str]) -> Result<Process> {
+    let mut cmd = command;
+    cmd.arg("worker")
+        .args(["--worker-id", id, "--zenoh-connect", zenoh])
+        .args(extra)
+        .env(
+            "RUST_LOG",
+            std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()),
+        );
+    let mut proc = Process::spawn(&format!("worker {id}"), cmd)?;
+    proc.wait_line(Duration::from_secs(60), |l| {
+        l.starts_with(planner_service::cli::WORKER_READY_PREFIX)
+            .then_some(())
+    })?;
+    Ok(proc)
+}
+
+/// The worker (`id` of `GET /api/v1/workers`) whose last cycle for robot `robot_id` it ran,
+/// if any.
+///
+/// # Errors
+/// Transport failures or a non-2xx status.
+pub fn planned_by(service: &Service, robot_id: &str) -> Result<Option<String>> {
+    let workers = service.get("/api/v1/workers")?;
+    Ok(workers.as_array().and_then(|all| {
+        all.iter()
+            .find(|w| {
+                w["robots"]
+                    .as_array()
+                    .is_some_and(|r| r.iter().any(|id| id == robot_id))
+            })
+            .and_then(|w| w["id"].as_str().map(str::to_string))
+    }))
+}
+
+/// The ids of the workers `GET /api/v1/workers` lists alive (the service included).
+///
+/// # Errors
+/// Transport failures or a non-2xx status.
+pub fn alive_workers(service: &Service) -> Result<Vec<String>> {
+    let workers = service.get("/api/v1/workers")?;
+    Ok(workers
+        .as_array()
+        .map(|all| {
+            all.iter()
+                .filter(|w| w["alive"] == true)
+                .filter_map(|w| w["id"].as_str().map(str::to_string))
+                .collect()
+        })
+        .unwrap_or_default())
+}

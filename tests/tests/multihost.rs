@@ -1,9 +1,9 @@
 //! Several hosts through a Zenoh router (issue 16, docs/deploy.md): the robots (simulator and
-//! agent) in one Linux network namespace, the planner service in another, and
-//! `planner-service router` between them, each namespace joined to the router's by its own
-//! veth pair, so the only way between robots and service is through the router. Cutting the
-//! robots' link pauses their task with a reason; restoring it resumes the task, which
-//! completes.
+//! agent) in one Linux network namespace, the planner service and a replanning worker in
+//! another, and `planner-service router` between them, each namespace joined to the router's by its own
+//! veth pair, so the only way between robots and service is through the router. The worker,
+//! not the service, plans the robot. Cutting the robots' link pauses their task with a reason;
+//! restoring it resumes the task, which completes.
 //!
 //! Needs root (`ip netns`, `ip link`): CI runs as root. Elsewhere the test says so and passes.
 
@@ -15,8 +15,9 @@ use std::process::Command;
 use std::time::Duration;
 
 use fleet_tests::{
-    bin_dir, free_port, history_kinds, repo_root, resumed_after_a_pause_and_completed, robot_xy,
-    state_kind, task_once_online, Process, Robots, RobotsSpec, Service,
+    alive_workers, bin_dir, free_port, history_kinds, planned_by, repo_root,
+    resumed_after_a_pause_and_completed, robot_xy, start_worker, state_kind, task_once_online,
+    Process, Robots, RobotsSpec, Service,
 };
 use protocol::MapName;
 use serde_json::Value;
@@ -194,6 +195,22 @@ fn robots_and_service_on_two_networks_meet_through_a_router_and_ride_out_a_cut_l
             &repo_root().join("sim/scenarios/maps/junctions.yaml"),
         )
         .unwrap();
+    // A replanning worker beside the service, also a client of the router.
+    let worker = start_worker(
+        server_ns.command(&bins.join("planner-service")),
+        "w1",
+        &server_side,
+        &["--zenoh-mode", "client"],
+    )
+    .unwrap();
+    service
+        .wait_for("/api/v1/workers", Duration::from_secs(20), |_| {
+            alive_workers(&service)
+                .ok()?
+                .contains(&"w1".to_string())
+                .then_some(())
+        })
+        .unwrap();
 
     // The robots on theirs, connected to the router's robots side only.
     let spec = RobotsSpec::new(
@@ -220,6 +237,12 @@ fn robots_and_service_on_two_networks_meet_through_a_router_and_ride_out_a_cut_l
             (r["status"]["state"] == "driving").then_some(())
         })
         .unwrap();
+    assert_eq!(
+        planned_by(&service, "robot_1").unwrap().as_deref(),
+        Some("w1"),
+        "the worker does not plan the robot: {}",
+        service.get("/api/v1/workers").unwrap()
+    );
 
     // The robots' network goes away: the task pauses, saying why.
     robots_ns.set_link(false);
@@ -251,6 +274,7 @@ fn robots_and_service_on_two_networks_meet_through_a_router_and_ride_out_a_cut_l
         "robot_1 ended at ({x}, {y})"
     );
     robots.stop(Duration::from_secs(5));
+    drop(worker);
     drop(service);
     router.kill();
 }

@@ -12,6 +12,7 @@ const TRAIL_WINDOW_MS = 60_000;
 const TRAIL_MAX_POINTS = 900;
 const LPE_REFRESH_MS = 600; // <= 2 Hz, as the service samples it
 const CAMERA_REFRESH_MS = 1200; // <= 1 Hz: camera frames are large
+const WORKERS_REFRESH_MS = 2000; // the worker list has no event: polled
 const RECENT_TASKS = 100; // finished tasks listed after a (re)connect
 const RECONNECT_MIN_MS = 1000;
 const RECONNECT_MAX_MS = 15_000;
@@ -75,6 +76,9 @@ const el = {
   robotCount: $('robot-count'),
   tasksBody: $('tasks-body'),
   taskCount: $('task-count'),
+  workersBody: $('workers-body'),
+  workerCount: $('worker-count'),
+  workersEmpty: $('workers-empty'),
   panelEmpty: $('robot-panel-empty'),
   panelBody: $('robot-panel-body'),
   lpeImg: $('lpe-img'),
@@ -522,6 +526,24 @@ async function refreshHealth() {
   }
 }
 
+// Background poll: a failure is shown in the panel's count, not as an alert every 2 s; the last
+// list stays on screen. One request at a time, so a slow service does not pile them up.
+let workersBusy = false;
+async function refreshWorkers() {
+  if (workersBusy) return;
+  workersBusy = true;
+  try {
+    const workers = await getJson(`${API}/workers`, { quiet: true });
+    renderWorkers(Array.isArray(workers) ? workers : []);
+    el.workerCount.classList.remove('bad');
+  } catch {
+    setText(el.workerCount, 'unavailable');
+    el.workerCount.classList.add('bad');
+  } finally {
+    workersBusy = false;
+  }
+}
+
 async function cancelTask(id, button) {
   button.disabled = true;
   try {
@@ -719,6 +741,43 @@ function renderTasks() {
       } else if (!live && button) {
         button.remove();
       }
+    },
+  );
+}
+
+function formatLatency(ms) {
+  // The service reports 0 before a worker's first cycle: no measurement yet, not 0 ms.
+  const v = Number(ms);
+  return Number.isFinite(v) && v > 0 ? `${v.toFixed(1)} ms` : '—';
+}
+
+function renderWorkers(workers) {
+  const alive = workers.filter((w) => w.alive).length;
+  setText(el.workerCount, `${alive}/${workers.length} alive`);
+  el.workersEmpty.hidden = workers.length > 0;
+  const cols = ['id', 'alive', 'robots', 'replans', 'failures', 'latency'];
+  syncRows(
+    el.workersBody,
+    workers,
+    (w) => String(w.id),
+    (w) => {
+      const tr = makeRow('worker-row', cols);
+      tr.dataset.workerId = String(w.id);
+      cols.forEach((c, i) => {
+        tr.cells[i].dataset.testid = `worker-${c}`;
+      });
+      return tr;
+    },
+    (tr, w) => {
+      const robots = w.robots || [];
+      tr.dataset.alive = String(Boolean(w.alive));
+      tr.classList.toggle('dead', !w.alive);
+      setText(tr.cells[0], String(w.id));
+      setText(tr.cells[1], w.alive ? 'yes' : 'no');
+      setText(tr.cells[2], robots.length ? robots.join(', ') : '—');
+      setText(tr.cells[3], String(w.replans ?? 0));
+      setText(tr.cells[4], String(w.failures ?? 0));
+      setText(tr.cells[5], formatLatency(w.mean_latency_ms));
     },
   );
 }
@@ -1432,6 +1491,8 @@ function init() {
 
   refreshHealth();
   setInterval(refreshHealth, 5000);
+  refreshWorkers();
+  setInterval(refreshWorkers, WORKERS_REFRESH_MS);
   loadMaps()
     .then(() => getJson(`${API}/tasks?limit=100`))
     .then((tasks) => {

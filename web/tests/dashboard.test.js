@@ -25,6 +25,7 @@ const fleet = { robots: [], mapName: null, grid: null, task: null };
 const dash = (fn, arg) => page.evaluate(fn, arg);
 const robotRow = (id) => page.locator(`[data-testid="robot-row"][data-robot-id="${id}"]`);
 const taskRow = (id) => page.locator(`[data-testid="task-row"][data-task-id="${id}"]`);
+const workerRow = (id) => page.locator(`[data-testid="worker-row"][data-worker-id="${id}"]`);
 const alerts = () => page.locator('[data-testid="error-area"]');
 
 async function api(path) {
@@ -312,5 +313,50 @@ test('the clicked task reaches completed', { timeout: TASK_TIMEOUT_MS + 30_000 }
     timeoutMs: 15_000,
     intervalMs: 250,
   });
+  assert.deepEqual(pageErrors, [], 'uncaught errors in the page');
+});
+
+test('the workers panel shows the service planning every robot', { timeout: 90_000 }, async () => {
+  // The demo starts no worker process, so the service itself plans every online robot; by now
+  // the clicked tasks have made it replan, so its count is above zero.
+  const demoRobots = (await api('api/v1/robots')).filter((r) => r.online).map((r) => r.id).sort();
+  assert.ok(demoRobots.length >= 2, `the demo has ${JSON.stringify(demoRobots)} online`);
+  assert.ok(fleet.robots.every((id) => demoRobots.includes(id)), `${JSON.stringify(fleet.robots)} not all online: ${JSON.stringify(demoRobots)}`);
+  const table = page.getByTestId('workers-table');
+  await table.waitFor({ state: 'visible' });
+  const row = workerRow('service');
+  await row.waitFor({ timeout: 20_000 });
+  assert.equal(await page.getByTestId('workers-empty').isHidden(), true, 'the empty-state line shows next to a listed worker');
+  assert.equal(await row.getByTestId('worker-id').innerText(), 'service');
+  assert.equal(await row.getByTestId('worker-alive').innerText(), 'yes');
+  assert.equal(await row.getAttribute('data-alive'), 'true');
+  assert.doesNotMatch((await row.getAttribute('class')) || '', /\bdead\b/, 'the service row is greyed out as dead');
+  await waitFor(
+    `the service listing ${demoRobots.join(', ')}`,
+    async () => {
+      const text = await row.getByTestId('worker-robots').innerText();
+      const listed = text.split(',').map((s) => s.trim()).filter(Boolean).sort();
+      return JSON.stringify(listed) === JSON.stringify(demoRobots) || null;
+    },
+    { timeoutMs: 30_000 },
+  );
+  const replans = await waitFor(
+    'the service replans counted',
+    async () => {
+      const n = Number(await row.getByTestId('worker-replans').innerText());
+      return Number.isInteger(n) && n > 0 && n;
+    },
+    { timeoutMs: 30_000 },
+  );
+  const failures = Number(await row.getByTestId('worker-failures').innerText());
+  assert.ok(Number.isInteger(failures) && failures >= 0 && failures <= replans, `failures ${failures} of ${replans} replans`);
+  assert.match(await row.getByTestId('worker-latency').innerText(), /^\d+\.\d ms$/);
+  // No worker process runs in the demo: nothing else is alive.
+  const alive = await page.locator('[data-testid="worker-row"][data-alive="true"]').evaluateAll((rs) => rs.map((r) => r.dataset.workerId));
+  assert.deepEqual(alive, ['service']);
+  // The 2 s poll reports its failures in the panel, never as an alert.
+  assert.equal(await alerts().locator('[data-testid="error-message"]').filter({ hasText: 'workers' }).count(), 0, await alerts().innerText());
+  await table.scrollIntoViewIfNeeded();
+  await screenshot(page, '09-workers');
   assert.deepEqual(pageErrors, [], 'uncaught errors in the page');
 });

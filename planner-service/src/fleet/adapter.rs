@@ -3,6 +3,10 @@
 //! publishes what the core decided. Also the two background loops: the watchdog and the
 //! publisher of announcements.
 //!
+//! With worker processes on the site (`planner-service worker`, [`super::remote`]) it also
+//! watches their liveliness tokens, answers their cycle queries from the task book and books
+//! the outcomes they report.
+//!
 //! Announcements (task changes, a stop for a robot whose task was cancelled, robot events)
 //! are queued while the core is locked, in the order the core made them, and one publisher
 //! task puts them on Zenoh and the event bus: nothing is published under the lock, and a
@@ -17,10 +21,12 @@ use protocol::{
 };
 use tokio::sync::{broadcast, mpsc, watch};
 use zenoh::pubsub::Subscriber;
+use zenoh::query::{Query, Queryable};
 use zenoh::sample::{Sample, SampleKind};
 use zenoh::{Session, Wait};
 
 use super::error::{zenoh_err, FleetError};
+use super::remote::{CycleReport, CycleRequest};
 use super::types::{FleetEvent, IntentionView, Task};
 use super::{now_ns, Fleet, Now};
 use crate::fleet::worker::Arrival;
@@ -40,7 +46,8 @@ pub(super) enum Outgoing {
     Event(Box<FleetEvent>),
 }
 
-/// Subscribes the robots' pose, status and camera keys and their liveliness tokens.
+/// Subscribes the robots' pose, status and camera keys and their liveliness tokens, the
+/// workers' tokens and cycle outcomes, and declares the cycle queryable.
 ///
 /// # Errors
 /// [`FleetError::Zenoh`].
@@ -48,8 +55,42 @@ pub(super) async fn subscribe(
     session: &Session,
     site: &SiteId,
     fleet: &Weak<Fleet>,
-) -> Result<Vec<Subscriber<()>>, FleetError> {
+) -> Result<(Vec<Subscriber<()>>, Queryable<()>), FleetError> {
     let mut subs = Vec::new();
+    let me = fleet.clone();
+    let outcomes = session
+        .declare_subscriber(keys::all_cycle_outcomes(site))
+        .callback(move |s| {
+            if let Some(f) = me.upgrade() {
+                f.on_outcome(&s);
+            }
+        })
+        .await
+        .map_err(zenoh_err("subscribe cycle outcomes"))?;
+    subs.push(outcomes);
+    let me = fleet.clone();
+    let cycles = session
+        .declare_queryable(keys::cycle_queryable(site))
+        .callback(move |q| {
+            if let Some(f) = me.upgrade() {
+                f.on_cycle_query(&q);
+            }
+        })
+        .await
+        .map_err(zenoh_err("declare the cycle queryable"))?;
+    let me = fleet.clone();
+    let workers = session
+        .liveliness()
+        .declare_subscriber(keys::workers_alive(site))
+        .history(true)
+        .callback(move |s| {
+            if let Some(f) = me.upgrade() {
+                f.on_worker(&s);
+            }
+        })
+        .await
+        .map_err(zenoh_err("watch the workers"))?;
+    subs.push(workers);
     for (topic, action) in [
         (RobotTopic::Pose, "subscribe poses"),
         (RobotTopic::Status, "subscribe status"),
@@ -84,7 +125,7 @@ pub(super) async fn subscribe(
         .await
         .map_err(zenoh_err("subscribe liveliness"))?;
     subs.push(alive);
-    Ok(subs)
+    Ok((subs, cycles))
 }
 
 impl Fleet {
@@ -127,8 +168,11 @@ impl Fleet {
             if seen.new {
                 self.start_worker(state, &id);
             }
-            if let Some(w) = state.workers.get(&id) {
-                w.send(Arrival { pose, received });
+            // While worker processes are alive they plan every robot.
+            if state.remote.is_empty() {
+                if let Some(w) = state.workers.get(&id) {
+                    w.send(Arrival { pose, received });
+                }
             }
             ((), effects)
         });
@@ -179,31 +223,102 @@ impl Fleet {
         }
     }
 
+    /// A worker process's liveliness token came or went.
+    fn on_worker(&self, sample: &Sample) {
+        let Some((site, worker)) = keys::parse_worker_alive_key(sample.key_expr().as_str()) else {
+            return;
+        };
+        if site != self.site {
+            return;
+        }
+        let joined = sample.kind() == SampleKind::Put;
+        let alive = self.with_state(|state| {
+            if joined {
+                state.remote.insert(worker.clone());
+            } else {
+                state.remote.remove(&worker);
+            }
+            (state.remote.len(), Vec::new())
+        });
+        if joined {
+            tracing::info!(worker = %worker, alive, "replanning worker joined");
+        } else if alive == 0 {
+            tracing::warn!(worker = %worker, "replanning worker left; the service plans again");
+        } else {
+            tracing::warn!(worker = %worker, alive, "replanning worker left; its robots move");
+        }
+    }
+
+    /// A worker asks what a robot's cycle is to do: the task book answers, as for the
+    /// service's own cycles.
+    fn on_cycle_query(&self, query: &Query) {
+        let refuse = |reason: String| {
+            tracing::warn!(key = %query.key_expr(), "refusing cycle query: {reason}");
+            if let Err(e) = query.reply_err(reason).wait() {
+                tracing::warn!("cannot answer cycle query: {e}");
+            }
+        };
+        let robot = match keys::parse_cycle_key(query.key_expr().as_str()) {
+            Some((site, robot, false)) if site == self.site => robot,
+            _ => return refuse("not a cycle key of this site".into()),
+        };
+        let request = match query
+            .payload()
+            .map(|p| protocol::decode::<CycleRequest>(&p.to_bytes()))
+        {
+            Some(Ok(r)) => r,
+            Some(Err(e)) => return refuse(format!("bad cycle request: {e}")),
+            None => return refuse("a cycle query carries the pose".into()),
+        };
+        let cycle = self.begin_cycle(&robot, &request.pose);
+        let answer = encode(&cycle).and_then(|bytes| {
+            query
+                .reply(query.key_expr(), bytes)
+                .encoding(protocol::zenoh_io::encoding_for::<super::core::Cycle>())
+                .wait()
+                .map_err(zenoh_err("reply"))
+        });
+        if let Err(e) = answer {
+            tracing::warn!(robot = %robot, worker = %request.worker_id, "cannot answer cycle query: {e}");
+        }
+    }
+
+    /// A worker reports how a cycle ended: booked like the service's own.
+    fn on_outcome(&self, sample: &Sample) {
+        let robot = match keys::parse_cycle_key(sample.key_expr().as_str()) {
+            Some((site, robot, true)) if site == self.site => robot,
+            _ => return,
+        };
+        match protocol::decode_sample::<CycleReport>(sample) {
+            Ok(report) => {
+                let worker = report.worker_id.to_string();
+                self.finish_cycle(&worker, &robot, report.into_outcome());
+            }
+            Err(e) => tracing::warn!(robot = %robot, "ignoring cycle outcome: {e}"),
+        }
+    }
+
     /// One watchdog round (see [`super::core::Core::watchdog`]).
     fn watchdog_round(&self) {
         let counts = self.with_core(|core| core.watchdog(Now::read()));
         self.metrics.set_robots(counts.online, counts.offline);
     }
 
-    /// Publishes an intention to its robot from synchronous code (a worker) and counts it;
-    /// `received` is when the answered pose arrived. The view to record, if it went out.
+    /// Publishes an intention to its robot from synchronous code (a worker); `received` is
+    /// when the answered pose arrived. The view to record, if it went out.
     pub(super) fn send_intention(
         &self,
         robot: &RobotId,
         intention: &Intention,
-        received: Option<Instant>,
+        received: Instant,
     ) -> Option<IntentionView> {
         let key = keys::robot(&self.site, robot, RobotTopic::Intention);
         if let Err(e) = put_sync(&self.session, &key, intention) {
             tracing::warn!(robot = %robot, "cannot publish intention: {e}");
             return None;
         }
-        let latency = received.map(|r| r.elapsed());
-        if let Some(l) = latency {
-            self.metrics.record_intention(l);
-        }
         Some(IntentionView {
-            latency_ms: latency.map_or(0.0, |l| l.as_secs_f64() * 1e3),
+            latency_ms: received.elapsed().as_secs_f64() * 1e3,
             ..IntentionView::of(intention)
         })
     }

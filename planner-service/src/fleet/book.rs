@@ -41,7 +41,8 @@ pub enum Effect {
 }
 
 /// What a robot's pose means for its task.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Decision {
     /// Plan from the pose to goal `next` of `goals`.
     Plan {

@@ -20,8 +20,8 @@ use super::store::{StoreError, TaskStore};
 use super::types::{IntentionView, NewTask, RobotView, Task};
 use super::Now;
 
-/// What one replanning cycle is to do for a pose.
-#[derive(Debug, Clone, PartialEq)]
+/// What one replanning cycle is to do for a pose (sent to a worker process as is).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Cycle {
     pub decision: Decision,
     /// Render the LPE image (the controller reads it, or the dashboard preview is due).

@@ -1,9 +1,13 @@
-//! Counters and the replan-latency histogram of the fleet, rendered as Prometheus text.
+//! Counters and the replan-latency histograms of the fleet (all of it, and per replanning
+//! worker), rendered as Prometheus text.
 //!
-//! Lock-free atomics: the replanning workers record into them on the hot path.
+//! Lock-free atomics on the hot path; the per-worker table is behind a leaf lock taken only to
+//! find a worker's entry.
 
+use std::collections::BTreeMap;
 use std::fmt::Write;
 use std::sync::atomic::{AtomicI64, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use super::types::TaskStateKind;
@@ -13,9 +17,115 @@ pub const LATENCY_BUCKETS_S: [f64; 12] = [
     0.001, 0.002, 0.005, 0.01, 0.015, 0.02, 0.03, 0.05, 0.1, 0.25, 0.5, 1.0,
 ];
 
+/// Who planned a cycle in the per-worker metrics: the service process itself.
+pub const SERVICE_WORKER: &str = "service";
+
+/// One worker's replans and their latency.
+#[derive(Debug, Default)]
+pub struct WorkerStats {
+    replans: AtomicU64,
+    failures: AtomicU64,
+    latency_buckets: [AtomicU64; LATENCY_BUCKETS_S.len()],
+    latency_count: AtomicU64,
+    latency_sum_ns: AtomicU64,
+}
+
+impl WorkerStats {
+    fn record(&self, latency: Option<Duration>, ok: Option<bool>) {
+        if let Some(ok) = ok {
+            self.replans.fetch_add(1, Ordering::Relaxed);
+            if !ok {
+                self.failures.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+        if let Some(l) = latency {
+            observe(
+                &self.latency_buckets,
+                &self.latency_count,
+                &self.latency_sum_ns,
+                l,
+            );
+        }
+    }
+
+    #[must_use]
+    pub fn replans(&self) -> u64 {
+        self.replans.load(Ordering::Relaxed)
+    }
+
+    #[must_use]
+    pub fn failures(&self) -> u64 {
+        self.failures.load(Ordering::Relaxed)
+    }
+
+    /// Mean pose-to-intention latency of the worker's cycles (0 before the first).
+    #[must_use]
+    pub fn mean_latency_ms(&self) -> f64 {
+        let n = self.latency_count.load(Ordering::Relaxed);
+        #[allow(clippy::cast_precision_loss)]
+        if n == 0 {
+            0.0
+        } else {
+            self.latency_sum_ns.load(Ordering::Relaxed) as f64 / n as f64 / 1e6
+        }
+    }
+}
+
+fn observe(
+    buckets: &[AtomicU64; LATENCY_BUCKETS_S.len()],
+    count: &AtomicU64,
+    sum_ns: &AtomicU64,
+    latency: Duration,
+) {
+    let s = latency.as_secs_f64();
+    for (bucket, le) in buckets.iter().zip(LATENCY_BUCKETS_S) {
+        if s <= le {
+            bucket.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+    count.fetch_add(1, Ordering::Relaxed);
+    let ns = u64::try_from(latency.as_nanos()).unwrap_or(u64::MAX);
+    sum_ns.fetch_add(ns, Ordering::Relaxed);
+}
+
+/// Writes one histogram's bucket, sum and count lines; `labels` go before `le`.
+fn render_histogram(
+    out: &mut String,
+    name: &str,
+    labels: &str,
+    buckets: &[AtomicU64; LATENCY_BUCKETS_S.len()],
+    count: &AtomicU64,
+    sum_ns: &AtomicU64,
+) {
+    let sep = if labels.is_empty() { "" } else { "," };
+    for (bucket, le) in buckets.iter().zip(LATENCY_BUCKETS_S) {
+        let _ = writeln!(
+            out,
+            "{name}_bucket{{{labels}{sep}le=\"{le}\"}} {}",
+            bucket.load(Ordering::Relaxed)
+        );
+    }
+    let count = count.load(Ordering::Relaxed);
+    #[allow(clippy::cast_precision_loss)]
+    let sum_s = sum_ns.load(Ordering::Relaxed) as f64 / 1e9;
+    let braces = if labels.is_empty() {
+        String::new()
+    } else {
+        format!("{{{labels}}}")
+    };
+    let _ = writeln!(
+        out,
+        "{name}_bucket{{{labels}{sep}le=\"+Inf\"}} {count}\n\
+         {name}_sum{braces} {sum_s}\n\
+         {name}_count{braces} {count}"
+    );
+}
+
 /// The fleet's metrics.
 #[derive(Debug, Default)]
 pub struct FleetMetrics {
+    /// Per replanning worker ([`SERVICE_WORKER`] for the service's own cycles).
+    workers: Mutex<BTreeMap<String, Arc<WorkerStats>>>,
     replans_total: AtomicU64,
     replan_failures_total: AtomicU64,
     replans_reused_total: AtomicU64,
@@ -50,15 +160,39 @@ impl FleetMetrics {
     /// One intention left the service `latency` after the pose it answers arrived.
     pub fn record_intention(&self, latency: Duration) {
         self.intentions_total.fetch_add(1, Ordering::Relaxed);
-        let s = latency.as_secs_f64();
-        for (bucket, le) in self.latency_buckets.iter().zip(LATENCY_BUCKETS_S) {
-            if s <= le {
-                bucket.fetch_add(1, Ordering::Relaxed);
-            }
-        }
-        self.latency_count.fetch_add(1, Ordering::Relaxed);
-        let ns = u64::try_from(latency.as_nanos()).unwrap_or(u64::MAX);
-        self.latency_sum_ns.fetch_add(ns, Ordering::Relaxed);
+        observe(
+            &self.latency_buckets,
+            &self.latency_count,
+            &self.latency_sum_ns,
+            latency,
+        );
+    }
+
+    /// A cycle planned by `worker`: its intention's latency (if one went out) and whether a
+    /// path was found (`None`: the robot had nothing to do).
+    pub fn record_worker(&self, worker: &str, latency: Option<Duration>, ok: Option<bool>) {
+        self.worker(worker).record(latency, ok);
+    }
+
+    /// The workers that have stats, sorted.
+    #[must_use]
+    pub fn worker_names(&self) -> Vec<String> {
+        self.workers
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .keys()
+            .cloned()
+            .collect()
+    }
+
+    /// The stats of `worker` (made on first use).
+    #[must_use]
+    pub fn worker(&self, worker: &str) -> Arc<WorkerStats> {
+        let mut workers = self
+            .workers
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        Arc::clone(workers.entry(worker.to_string()).or_default())
     }
 
     /// A task moved from `from` (None: new) to `to`.
@@ -120,22 +254,15 @@ impl FleetMetrics {
             "# HELP fleet_replan_latency_seconds Pose received to intention published.\n\
              # TYPE fleet_replan_latency_seconds histogram"
         );
-        for (bucket, le) in self.latency_buckets.iter().zip(LATENCY_BUCKETS_S) {
-            let _ = writeln!(
-                out,
-                "fleet_replan_latency_seconds_bucket{{le=\"{le}\"}} {}",
-                load(bucket)
-            );
-        }
-        let count = load(&self.latency_count);
-        #[allow(clippy::cast_precision_loss)]
-        let sum_s = load(&self.latency_sum_ns) as f64 / 1e9;
-        let _ = writeln!(
+        render_histogram(
             out,
-            "fleet_replan_latency_seconds_bucket{{le=\"+Inf\"}} {count}\n\
-             fleet_replan_latency_seconds_sum {sum_s}\n\
-             fleet_replan_latency_seconds_count {count}"
+            "fleet_replan_latency_seconds",
+            "",
+            &self.latency_buckets,
+            &self.latency_count,
+            &self.latency_sum_ns,
         );
+        self.render_workers(out);
         let _ = writeln!(
             out,
             "# HELP fleet_replans_total Replans run.\n# TYPE fleet_replans_total counter\n\
@@ -172,6 +299,58 @@ impl FleetMetrics {
     }
 }
 
+impl FleetMetrics {
+    fn render_workers(&self, out: &mut String) {
+        let workers: Vec<(String, Arc<WorkerStats>)> = self
+            .workers
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .iter()
+            .map(|(k, v)| (k.clone(), Arc::clone(v)))
+            .collect();
+        let _ = writeln!(
+            out,
+            "# HELP fleet_worker_replan_latency_seconds Pose received to intention published, \
+             by the worker that planned it (service: the service process itself).\n\
+             # TYPE fleet_worker_replan_latency_seconds histogram"
+        );
+        for (name, w) in &workers {
+            render_histogram(
+                out,
+                "fleet_worker_replan_latency_seconds",
+                &format!("worker=\"{name}\""),
+                &w.latency_buckets,
+                &w.latency_count,
+                &w.latency_sum_ns,
+            );
+        }
+        let _ = writeln!(
+            out,
+            "# HELP fleet_worker_replans_total Replans run, by worker.\n\
+             # TYPE fleet_worker_replans_total counter"
+        );
+        for (name, w) in &workers {
+            let _ = writeln!(
+                out,
+                "fleet_worker_replans_total{{worker=\"{name}\"}} {}",
+                w.replans()
+            );
+        }
+        let _ = writeln!(
+            out,
+            "# HELP fleet_worker_replan_failures_total Replans that found no path, by worker.\n\
+             # TYPE fleet_worker_replan_failures_total counter"
+        );
+        for (name, w) in &workers {
+            let _ = writeln!(
+                out,
+                "fleet_worker_replan_failures_total{{worker=\"{name}\"}} {}",
+                w.failures()
+            );
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -191,5 +370,27 @@ mod tests {
         assert!(text.contains("fleet_replan_latency_seconds_count 2"));
         assert!(text.contains("fleet_tasks{state=\"queued\"} 0"));
         assert!(text.contains("fleet_tasks{state=\"active\"} 1"));
+    }
+
+    #[test]
+    fn each_worker_has_its_own_histogram() {
+        let m = FleetMetrics::default();
+        m.record_worker("w1", Some(Duration::from_millis(3)), Some(true));
+        m.record_worker("w1", Some(Duration::from_millis(40)), Some(false));
+        m.record_worker(SERVICE_WORKER, Some(Duration::from_micros(500)), None);
+        let mut text = String::new();
+        m.render_prometheus(&mut text);
+        assert!(text
+            .contains("fleet_worker_replan_latency_seconds_bucket{worker=\"w1\",le=\"0.005\"} 1"));
+        assert!(text
+            .contains("fleet_worker_replan_latency_seconds_bucket{worker=\"w1\",le=\"0.05\"} 2"));
+        assert!(text.contains("fleet_worker_replan_latency_seconds_count{worker=\"w1\"} 2"));
+        assert!(text.contains("fleet_worker_replans_total{worker=\"w1\"} 2"));
+        assert!(text.contains("fleet_worker_replan_failures_total{worker=\"w1\"} 1"));
+        assert!(text.contains("fleet_worker_replans_total{worker=\"service\"} 0"));
+        assert!(text.contains(
+            "fleet_worker_replan_latency_seconds_bucket{worker=\"service\",le=\"0.001\"} 1"
+        ));
+        assert!((m.worker("w1").mean_latency_ms() - 21.5).abs() < 1e-9);
     }
 }

@@ -9,7 +9,10 @@
 //!   round or a replan means. Plain data in, effects out, time passed in: tested without
 //!   Zenoh and without sleeping.
 //! - `adapter`: the thin Zenoh side — decodes samples, calls the core, publishes its effects.
-//! - `worker`: one replanning worker per robot, calling the planning crate.
+//! - `worker`: one replanning worker per robot, calling the planning crate; the cycle it runs
+//!   is the same in the service and in worker processes.
+//! - [`remote`]: worker processes (`planner-service worker`) that take the replanning off the
+//!   service, each planning the robots [`rendezvous`] hashing gives it.
 //! - [`config`], [`error`], [`types`], [`metrics`], [`store`]: the `[fleet]` table, errors,
 //!   the API's JSON shapes, Prometheus metrics, the task database.
 //!
@@ -25,29 +28,36 @@ pub mod core;
 pub mod error;
 pub mod metrics;
 pub mod registry;
+pub mod remote;
+pub mod rendezvous;
 pub mod store;
 pub mod types;
 
 mod adapter;
 mod worker;
 
-use std::collections::HashMap;
+use std::collections::{BTreeSet, HashMap};
 use std::path::Path;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError, Weak};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use map_store::MapStore;
-use planning::{stop_intention, Endpoint};
-use protocol::{Header, Image, ImageEncoding, Pose2D, RobotId, SiteId, TaskEvent, TaskId};
+use planning::{stop_intention, Endpoint, IntentionConfig, PlanningMap};
+use protocol::{
+    Header, Image, ImageEncoding, Intention, MapName, Pose2D, PoseEstimate, RobotId, SiteId,
+    TaskEvent, TaskId, WorkerId,
+};
 use tokio::sync::{broadcast, mpsc, watch};
 use zenoh::pubsub::Subscriber;
+use zenoh::query::Queryable;
 use zenoh::Session;
 
 use self::adapter::Outgoing;
 use self::book::Effect;
-use self::core::Core;
-use self::worker::{PlanningMaps, Worker};
+use self::core::{Core, Cycle};
+use self::metrics::SERVICE_WORKER;
+use self::worker::{CycleHost, MapSource, Outcome, PlanningMaps, Worker};
 use crate::config::ServiceConfig;
 
 pub use self::config::{FleetConfig, InvalidFleetConfig};
@@ -56,7 +66,7 @@ pub use self::metrics::FleetMetrics;
 pub use self::store::{Retention, StoreError, SweepReport, TaskStore};
 pub use self::types::{
     Cursor, FleetEvent, Goal, HistoryEntry, IntentionView, NewTask, PoseView, RobotView,
-    StatusView, Task, TaskFilter, TaskPage, TaskStateKind,
+    StatusView, Task, TaskFilter, TaskPage, TaskStateKind, WorkerView,
 };
 
 /// When something happens: the monotonic instant (timers) and the wall clock (stored stamps).
@@ -104,12 +114,19 @@ struct State {
     core: Core,
     /// Each registered robot's worker (started by the adapter when it registers the robot).
     workers: HashMap<RobotId, Worker>,
+    /// Worker processes alive on the site (their liveliness tokens): while there is one, they
+    /// plan every robot and the robots' workers here wait.
+    remote: BTreeSet<WorkerId>,
+    /// Who planned each robot's last cycle ([`SERVICE_WORKER`] or a worker process's id).
+    served_by: HashMap<RobotId, String>,
 }
 
 /// The background side: Zenoh subscriptions and loops, ended by [`Fleet::shutdown`].
 #[derive(Default)]
 struct Io {
     subscribers: Vec<Subscriber<()>>,
+    /// The cycle queryable that worker processes ask.
+    queryable: Option<Queryable<()>>,
     tasks: Vec<tokio::task::JoinHandle<()>>,
 }
 
@@ -121,6 +138,7 @@ pub struct Fleet {
     config: ServiceConfig,
     runtime: tokio::runtime::Handle,
     store: Arc<TaskStore>,
+    maps: Arc<MapStore>,
     planning: PlanningMaps,
     state: Mutex<State>,
     /// Announcements in the order the core made them, to the publisher task.
@@ -173,13 +191,19 @@ impl Fleet {
             me: me.clone(),
             site,
             session,
-            planning: PlanningMaps::new(maps, config.planner.clone()),
+            planning: PlanningMaps::new(
+                MapSource::Store(Arc::clone(&maps)),
+                config.planner.clone(),
+            ),
+            maps,
             config,
             runtime: tokio::runtime::Handle::current(),
             store,
             state: Mutex::new(State {
                 core,
                 workers: HashMap::new(),
+                remote: BTreeSet::new(),
+                served_by: HashMap::new(),
             }),
             outbox,
             events,
@@ -197,7 +221,7 @@ impl Fleet {
             ((), Vec::new())
         });
         let subscribed = adapter::subscribe(&fleet.session, &fleet.site, &fleet.me).await;
-        let subscribers = match subscribed {
+        let (subscribers, queryable) = match subscribed {
             Ok(s) => s,
             Err(e) => {
                 fleet.shutdown().await;
@@ -215,6 +239,7 @@ impl Fleet {
         {
             let mut io = lock(&fleet.io);
             io.subscribers = subscribers;
+            io.queryable = Some(queryable);
             io.tasks.push(watchdog);
             io.tasks.push(sweeper);
         }
@@ -229,6 +254,11 @@ impl Fleet {
         for s in io.subscribers {
             if let Err(e) = s.undeclare().await {
                 tracing::warn!("cannot undeclare subscriber: {e}");
+            }
+        }
+        if let Some(q) = io.queryable {
+            if let Err(e) = q.undeclare().await {
+                tracing::warn!("cannot undeclare the cycle queryable: {e}");
             }
         }
         for t in io.tasks {
@@ -249,7 +279,7 @@ impl Fleet {
 
     #[must_use]
     pub fn maps(&self) -> &Arc<MapStore> {
-        self.planning.store()
+        &self.maps
     }
 
     #[must_use]
@@ -279,6 +309,46 @@ impl Fleet {
     #[must_use]
     pub fn robot(&self, id: &RobotId) -> Option<RobotView> {
         self.read(|core| core.view(id))
+    }
+
+    /// The replanning workers: the service itself and every worker process alive, each with
+    /// the online robots whose last cycle it planned and its counts; workers that left are
+    /// listed (not alive) while they have counts.
+    #[must_use]
+    pub fn workers(&self) -> Vec<WorkerView> {
+        let (remote, mut planned) = {
+            let state = lock(&self.state);
+            let mut planned: HashMap<String, Vec<RobotId>> = HashMap::new();
+            for robot in state.core.registry.iter().filter(|r| r.online) {
+                if let Some(worker) = state.served_by.get(&robot.id) {
+                    planned
+                        .entry(worker.clone())
+                        .or_default()
+                        .push(robot.id.clone());
+                }
+            }
+            (state.remote.clone(), planned)
+        };
+        let mut names: BTreeSet<String> = self.metrics.worker_names().into_iter().collect();
+        names.insert(SERVICE_WORKER.to_string());
+        names.extend(remote.iter().map(ToString::to_string));
+        names
+            .into_iter()
+            .map(|name| {
+                let stats = self.metrics.worker(&name);
+                let mut robots = planned.remove(&name).unwrap_or_default();
+                robots.sort();
+                WorkerView {
+                    alive: name == SERVICE_WORKER
+                        || WorkerId::new(name.as_str()).is_ok_and(|w| remote.contains(&w)),
+                    id: name,
+                    robots,
+                    replans: stats.replans(),
+                    failures: stats.failures(),
+                    mean_latency_ms: stats.mean_latency_ms(),
+                }
+            })
+            .collect()
     }
 
     /// PNG of the LPE image of the robot's latest intention that had one.
@@ -488,6 +558,99 @@ impl Fleet {
     fn header(&self) -> Header {
         let seq = self.seq.fetch_add(1, Ordering::Relaxed);
         Header::new(seq, now_ns())
+    }
+}
+
+impl Fleet {
+    /// Books the end of a cycle that `worker` ran for robot `id` (the service's own cycles
+    /// and the worker processes' reports alike).
+    pub(crate) fn finish_cycle(&self, worker: &str, id: &RobotId, outcome: Outcome) {
+        let ok = match &outcome {
+            Outcome::Stopped { .. } => None,
+            Outcome::Planned { .. } => Some(true),
+            Outcome::Failed { .. } => Some(false),
+        };
+        if let Some(ok) = ok {
+            self.metrics.record_replan(ok);
+        }
+        if matches!(outcome, Outcome::Planned { reused: true, .. }) {
+            self.metrics.record_reuse();
+        }
+        let sent = outcome.sent().cloned();
+        let latency = sent
+            .as_ref()
+            .map(|v| Duration::from_secs_f64(v.latency_ms.max(0.0) / 1e3));
+        if let Some(l) = latency {
+            self.metrics.record_intention(l);
+        }
+        self.metrics.record_worker(worker, latency, ok);
+        self.with_state(|state| {
+            if state.served_by.get(id).is_none_or(|w| w != worker) {
+                state.served_by.insert(id.clone(), worker.to_string());
+            }
+            let core = &mut state.core;
+            let now = Now::read();
+            let effects = match outcome {
+                Outcome::Stopped { sent } => {
+                    if let Some(view) = sent {
+                        core.intention_sent(id, view);
+                    }
+                    Vec::new()
+                }
+                Outcome::Planned { sent, lpe, .. } => {
+                    core.planned(id, sent, lpe, now);
+                    Vec::new()
+                }
+                Outcome::Failed {
+                    sent,
+                    task,
+                    goal,
+                    error,
+                } => core.plan_failed(id, sent, &task, goal, &error, now),
+            };
+            ((), effects)
+        });
+        if let Some(view) = sent {
+            self.intention_event(id, view);
+        }
+    }
+
+    /// What the cycle of robot `id` for `pose` is to do, from the task book.
+    pub(crate) fn begin_cycle(&self, id: &RobotId, pose: &PoseEstimate) -> Cycle {
+        let watched = self.watched();
+        self.with_core(|core| core.begin_cycle(id, pose, Now::read(), watched))
+    }
+}
+
+/// The service's own cycles (while no worker process is alive).
+impl CycleHost for Fleet {
+    fn begin(&self, id: &RobotId, pose: &PoseEstimate) -> Option<Cycle> {
+        Some(self.begin_cycle(id, pose))
+    }
+
+    fn planning_map(&self, name: &MapName, version: u32) -> Result<Arc<PlanningMap>, FleetError> {
+        self.planning.get(name, version)
+    }
+
+    fn intention_config(&self) -> IntentionConfig {
+        self.config.intention()
+    }
+
+    fn header(&self) -> Header {
+        Fleet::header(self)
+    }
+
+    fn send_intention(
+        &self,
+        id: &RobotId,
+        intention: &Intention,
+        received: Instant,
+    ) -> Option<IntentionView> {
+        Fleet::send_intention(self, id, intention, received)
+    }
+
+    fn finish(&self, id: &RobotId, outcome: Outcome) {
+        self.finish_cycle(SERVICE_WORKER, id, outcome);
     }
 }
 

@@ -310,6 +310,21 @@ impl IntentionView {
     }
 }
 
+/// A replanning worker as the service knows it (`GET /api/v1/workers`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WorkerView {
+    /// `service` (the service process itself) or a worker process's id.
+    pub id: String,
+    /// Its liveliness token is up (the service is always alive).
+    pub alive: bool,
+    /// Online robots whose last replanning cycle it ran.
+    pub robots: Vec<RobotId>,
+    pub replans: u64,
+    pub failures: u64,
+    /// Mean pose-to-intention latency of its cycles, measured where it planned.
+    pub mean_latency_ms: f64,
+}
+
 /// A robot as the service knows it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RobotView {

@@ -1,52 +1,117 @@
-//! Per-robot replanning workers and the planning maps they share.
+//! Per-robot replanning workers, the one replanning cycle, and the planning maps they share.
 //!
-//! Each robot the adapter registers gets one worker, started right then (never as a side
-//! effect of a lookup). Poses reach it through a one-slot channel: a worker that is still
-//! planning skips the poses that arrived meanwhile and plans from the newest, so a slow robot
-//! or a slow plan never queues up, and workers of different robots run in parallel on the
-//! blocking pool. A worker owns its robot's [`IntentionPlanner`]; the planning itself (goal
-//! advancement, hybrid A*, DLM, LPE, path thinning) is the planning crate's, called through
+//! Each robot gets one worker, started when it is first seen (never as a side effect of a
+//! lookup). Poses reach it through a one-slot channel: a worker that is still planning skips
+//! the poses that arrived meanwhile and plans from the newest, so a slow robot or a slow plan
+//! never queues up, and workers of different robots run in parallel on the blocking pool. A
+//! worker owns its robot's [`IntentionPlanner`]; the planning itself (goal advancement,
+//! hybrid A*, DLM, LPE, path thinning) is the planning crate's, called through
 //! [`IntentionPlanner::answer`].
+//!
+//! The cycle is the same wherever it runs; what differs is behind [`CycleHost`]: the service
+//! process itself (its task book under its lock, its own map store), or a worker process
+//! (`planner-service worker`, [`super::remote`]) that asks the service's book over Zenoh and
+//! reports back.
 
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, Weak};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use map_store::MapStore;
 use planning::{
-    stop_intention, Answer, GoalProgress, IntentionPlanner, MapKey, PlannerConfig, PlanningMap,
+    stop_intention, Answer, GoalProgress, IntentionConfig, IntentionPlanner, LpeImage, MapKey,
+    PlannerConfig, PlanningMap,
 };
-use protocol::{MapName, PoseEstimate, RobotId};
+use protocol::{Header, Intention, MapName, PoseEstimate, RobotId, SiteId, TaskId};
 use tokio::sync::watch;
+use zenoh::Session;
 
 use super::book::Decision;
+use super::core::Cycle;
 use super::error::FleetError;
-use super::{lock, Fleet, Now};
+use super::lock;
+use super::types::IntentionView;
 
-/// A pose and when it reached the service (for the intention latency).
+/// A pose and when it reached the process that plans it (for the intention latency).
 #[derive(Debug, Clone)]
-pub(super) struct Arrival {
+pub(crate) struct Arrival {
     pub pose: PoseEstimate,
     pub received: Instant,
 }
 
+/// How one cycle ended, for the task book: the intention that went out (if it did) and what
+/// the planning came to.
+#[derive(Debug, Clone)]
+pub(crate) enum Outcome {
+    /// The robot has nothing to do (no task, another map, just completed): it was stopped.
+    Stopped { sent: Option<IntentionView> },
+    /// A path was found; `lpe` is the rendered image when the cycle asked for one.
+    Planned {
+        sent: Option<IntentionView>,
+        lpe: Option<LpeImage>,
+        reused: bool,
+    },
+    /// No path to goal `goal` of `task`: the robot was stopped.
+    Failed {
+        sent: Option<IntentionView>,
+        task: TaskId,
+        goal: usize,
+        error: String,
+    },
+}
+
+impl Outcome {
+    pub fn sent(&self) -> Option<&IntentionView> {
+        match self {
+            Outcome::Stopped { sent }
+            | Outcome::Planned { sent, .. }
+            | Outcome::Failed { sent, .. } => sent.as_ref(),
+        }
+    }
+}
+
+/// What a cycle needs from the process it runs in (see the module docs).
+pub(crate) trait CycleHost: Send + Sync + 'static {
+    /// What the cycle for `pose` is to do; `None` when there is no answer (a worker that cannot
+    /// reach the service): the cycle is skipped and the robot keeps its last intention.
+    fn begin(&self, id: &RobotId, pose: &PoseEstimate) -> Option<Cycle>;
+    /// The planning map of a stored map version.
+    ///
+    /// # Errors
+    /// The map is unknown or cannot be built.
+    fn planning_map(&self, name: &MapName, version: u32) -> Result<Arc<PlanningMap>, FleetError>;
+    fn intention_config(&self) -> IntentionConfig;
+    fn header(&self) -> Header;
+    /// Publishes `intention` to robot `id`; the view to record (latency from `received`), if
+    /// it went out.
+    fn send_intention(
+        &self,
+        id: &RobotId,
+        intention: &Intention,
+        received: Instant,
+    ) -> Option<IntentionView>;
+    /// The cycle's end, for the task book.
+    fn finish(&self, id: &RobotId, outcome: Outcome);
+}
+
 /// The running worker of one robot: its pose slot and its task.
 #[derive(Debug)]
-pub(super) struct Worker {
+pub(crate) struct Worker {
     poses: watch::Sender<Option<Arrival>>,
     task: tokio::task::JoinHandle<()>,
 }
 
 impl Worker {
-    /// Starts the worker of robot `id` on `runtime`; it ends with `shutdown` or the fleet.
-    pub fn spawn(
+    /// Starts the worker of robot `id` on `runtime`; it ends with `shutdown`, when the host
+    /// is gone, or when dropped.
+    pub fn spawn<H: CycleHost>(
         runtime: &tokio::runtime::Handle,
-        fleet: Weak<Fleet>,
+        host: Weak<H>,
         id: RobotId,
         shutdown: watch::Receiver<bool>,
     ) -> Self {
         let (poses, rx) = watch::channel(None);
-        let task = runtime.spawn(run(fleet, id, rx, shutdown));
+        let task = runtime.spawn(run(host, id, rx, shutdown));
         Self { poses, task }
     }
 
@@ -56,6 +121,12 @@ impl Worker {
     }
 
     pub fn abort(&self) {
+        self.task.abort();
+    }
+}
+
+impl Drop for Worker {
+    fn drop(&mut self) {
         self.task.abort();
     }
 }
@@ -71,10 +142,10 @@ impl Pipeline {
     /// The pipeline on the planning map of the pose's map version.
     fn on_map(
         &mut self,
-        fleet: &Fleet,
+        host: &impl CycleHost,
         pose: &PoseEstimate,
     ) -> Result<&mut IntentionPlanner, FleetError> {
-        let map = fleet.planning.get(&pose.map.name, pose.map.version)?;
+        let map = host.planning_map(&pose.map.name, pose.map.version)?;
         let planning = |source| FleetError::Planning {
             map: pose.map.name.to_string(),
             source,
@@ -85,8 +156,7 @@ impl Pipeline {
                 Ok(p)
             }
             slot @ None => {
-                let made =
-                    IntentionPlanner::new(map, fleet.config.intention()).map_err(planning)?;
+                let made = IntentionPlanner::new(map, host.intention_config()).map_err(planning)?;
                 Ok(slot.insert(made))
             }
         }
@@ -94,8 +164,8 @@ impl Pipeline {
 }
 
 /// The worker loop: plans from the newest pose, skipping the ones that arrived meanwhile.
-async fn run(
-    fleet: Weak<Fleet>,
+async fn run<H: CycleHost>(
+    host: Weak<H>,
     id: RobotId,
     mut poses: watch::Receiver<Option<Arrival>>,
     mut shutdown: watch::Receiver<bool>,
@@ -109,7 +179,7 @@ async fn run(
         let Some(arrival) = poses.borrow_and_update().clone() else {
             continue;
         };
-        let Some(f) = fleet.upgrade() else {
+        let Some(h) = host.upgrade() else {
             break;
         };
         let Some(mut st) = state.take() else {
@@ -117,7 +187,7 @@ async fn run(
         };
         let robot = id.clone();
         match tokio::task::spawn_blocking(move || {
-            cycle(&f, &robot, &arrival, &mut st);
+            cycle(h.as_ref(), &robot, &arrival, &mut st);
             st
         })
         .await
@@ -132,22 +202,20 @@ async fn run(
 }
 
 /// One replanning cycle of one robot for the pose that just arrived (blocking pool): the task
-/// brought up to date under the fleet's lock, the plan made outside it, the intention sent,
-/// the outcome recorded.
-fn cycle(fleet: &Fleet, id: &RobotId, arrival: &Arrival, st: &mut Pipeline) {
+/// brought up to date by the host, the plan made, the intention sent, the outcome reported.
+fn cycle(host: &impl CycleHost, id: &RobotId, arrival: &Arrival, st: &mut Pipeline) {
     let pose = &arrival.pose;
-    let watched = fleet.watched();
-    let cycle = fleet.with_core(|core| core.begin_cycle(id, pose, Now::read(), watched));
+    let Some(cycle) = host.begin(id, pose) else {
+        return;
+    };
     let Decision::Plan { task, goals, next } = cycle.decision else {
-        let stop = stop_intention(fleet.header(), pose, None, 0);
-        if let Some(view) = fleet.send_intention(id, &stop, Some(arrival.received)) {
-            fleet.with_core(|core| (core.intention_sent(id, view.clone()), Vec::new()));
-            fleet.intention_event(id, view);
-        }
+        let stop = stop_intention(host.header(), pose, None, 0);
+        let sent = host.send_intention(id, &stop, arrival.received);
+        host.finish(id, Outcome::Stopped { sent });
         return;
     };
     let answer = st
-        .on_map(fleet, pose)
+        .on_map(host, pose)
         .map(|p| p.answer(pose, &GoalProgress::new(&goals, next), cycle.render_lpe));
     let planned = match answer {
         Ok(Answer::Heading { goal_index, plan }) => {
@@ -163,36 +231,76 @@ fn cycle(fleet: &Fleet, id: &RobotId, arrival: &Arrival, st: &mut Pipeline) {
         ))),
         Err(e) => Err(e),
     };
-    match planned {
+    let outcome = match planned {
         Ok((goal_index, planned)) => {
-            fleet.metrics.record_replan(true);
-            if planned.reused {
-                fleet.metrics.record_reuse();
-            }
             // The image travels only to a robot whose controller reads it; the dashboard's
-            // preview stays here.
+            // preview stays with the book.
             let intention =
-                planned.intention(fleet.header(), pose, Some(task), goal_index, cycle.send_lpe);
-            let sent = fleet.send_intention(id, &intention, Some(arrival.received));
-            let view = sent.clone();
-            fleet.with_core(|core| (core.planned(id, view, planned.lpe, Now::read()), Vec::new()));
-            if let Some(view) = sent {
-                fleet.intention_event(id, view);
+                planned.intention(host.header(), pose, Some(task), goal_index, cycle.send_lpe);
+            Outcome::Planned {
+                sent: host.send_intention(id, &intention, arrival.received),
+                lpe: planned.lpe,
+                reused: planned.reused,
             }
         }
         Err(e) => {
-            fleet.metrics.record_replan(false);
             tracing::debug!(robot = %id, task = %task, "replan failed: {e}");
-            let stop = stop_intention(fleet.header(), pose, Some(task.clone()), next);
-            let sent = fleet.send_intention(id, &stop, Some(arrival.received));
-            let view = sent.clone();
-            let error = e.to_string();
-            fleet.with_core(|core| {
-                let effects = core.plan_failed(id, view, &task, next, &error, Now::read());
-                ((), effects)
-            });
-            if let Some(view) = sent {
-                fleet.intention_event(id, view);
+            let stop = stop_intention(host.header(), pose, Some(task.clone()), next);
+            Outcome::Failed {
+                sent: host.send_intention(id, &stop, arrival.received),
+                task,
+                goal: next,
+                error: e.to_string(),
+            }
+        }
+    };
+    host.finish(id, outcome);
+}
+
+/// Where planning maps come from: the service's own store, or the site's map store over Zenoh
+/// (a worker process).
+pub(crate) enum MapSource {
+    Store(Arc<MapStore>),
+    Zenoh {
+        session: Session,
+        site: SiteId,
+        timeout: Duration,
+        runtime: tokio::runtime::Handle,
+    },
+}
+
+impl MapSource {
+    fn grid(&self, name: &MapName, version: u32) -> Result<map_store::OccupancyGrid, FleetError> {
+        match self {
+            MapSource::Store(store) => store
+                .get(name, Some(version))
+                .map(|stored| stored.grid)
+                .map_err(|e| FleetError::from_map(e, || format!("{name} version {version}"))),
+            MapSource::Zenoh {
+                session,
+                site,
+                timeout,
+                runtime,
+            } => {
+                // Called from the blocking pool, where waiting on the runtime is allowed.
+                let map = runtime
+                    .block_on(map_store::fetch::fetch_map(
+                        session,
+                        site,
+                        name,
+                        Some(version),
+                        *timeout,
+                    ))
+                    .map_err(|e| FleetError::from_map(e, || format!("{name} version {version}")))?;
+                let meta = map.meta;
+                map_store::OccupancyGrid::new(
+                    meta.width_cells,
+                    meta.height_cells,
+                    meta.resolution_m,
+                    meta.origin,
+                    map.cells,
+                )
+                .map_err(FleetError::Map)
             }
         }
     }
@@ -202,23 +310,19 @@ fn cycle(fleet: &Fleet, id: &RobotId, arrival: &Arrival, st: &mut Pipeline) {
 ///
 /// Its lock is a leaf: held only to look up or insert, never while building a map or taking
 /// another lock.
-pub(super) struct PlanningMaps {
-    maps: Arc<MapStore>,
+pub(crate) struct PlanningMaps {
+    source: MapSource,
     planner: PlannerConfig,
     built: Mutex<HashMap<(MapName, u32), Arc<PlanningMap>>>,
 }
 
 impl PlanningMaps {
-    pub fn new(maps: Arc<MapStore>, planner: PlannerConfig) -> Self {
+    pub fn new(source: MapSource, planner: PlannerConfig) -> Self {
         Self {
-            maps,
+            source,
             planner,
             built: Mutex::new(HashMap::new()),
         }
-    }
-
-    pub fn store(&self) -> &Arc<MapStore> {
-        &self.maps
     }
 
     /// The planning map of map `name` version `version`.
@@ -230,16 +334,13 @@ impl PlanningMaps {
         if let Some(m) = lock(&self.built).get(&key) {
             return Ok(Arc::clone(m));
         }
-        let stored = self
-            .maps
-            .get(name, Some(version))
-            .map_err(|e| FleetError::from_map(e, || format!("{name} version {version}")))?;
+        let grid = self.source.grid(name, version)?;
         // Built outside the lock: a big map takes a while and other maps stay usable.
-        let built = PlanningMap::with_key(stored.grid, MapKey(u64::from(version)), &self.planner)
+        let built = PlanningMap::with_key(grid, MapKey(u64::from(version)), &self.planner)
             .map_err(|source| FleetError::Planning {
-            map: name.to_string(),
-            source,
-        })?;
+                map: name.to_string(),
+                source,
+            })?;
         Ok(Arc::clone(
             lock(&self.built).entry(key).or_insert(Arc::new(built)),
         ))

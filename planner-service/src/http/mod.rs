@@ -130,6 +130,7 @@ fn build(http: &HttpConfig) -> Routes {
         )
         .add(Method::GET, "/api/v1/robots", get(robots::list))
         .add(Method::GET, "/api/v1/robots/{id}", get(robots::get))
+        .add(Method::GET, "/api/v1/workers", get(robots::workers))
         .add(
             Method::GET,
             "/api/v1/robots/{id}/lpe.png",

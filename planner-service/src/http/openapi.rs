@@ -234,6 +234,19 @@ fn schemas() -> Value {
                 "intention": { "oneOf": [r("Intention"), { "type": "null" }] }
             }
         },
+        "Worker": {
+            "type": "object",
+            "required": ["id", "alive", "robots", "replans", "failures", "mean_latency_ms"],
+            "description": "A replanning worker: `service` (the service process, which plans while no worker process is alive) or a `planner-service worker` process.",
+            "properties": {
+                "id": { "type": "string" },
+                "alive": { "type": "boolean", "description": "Its liveliness token is up." },
+                "robots": { "type": "array", "items": { "type": "string" }, "description": "Online robots whose last replanning cycle it ran." },
+                "replans": uint,
+                "failures": uint,
+                "mean_latency_ms": { "type": "number", "minimum": 0 }
+            }
+        },
         "Health": {
             "type": "object", "required": ["status", "version", "robots_online", "tasks_active"],
             "properties": {
@@ -392,6 +405,10 @@ pub fn document() -> Value {
             "/api/v1/robots": { "get": {
                 "summary": "Every known robot, sorted by id.",
                 "responses": { "200": ok("Robots.", json!({ "type": "array", "items": r("Robot") })), "401": err("Unauthorized") }
+            } },
+            "/api/v1/workers": { "get": {
+                "summary": "The replanning workers (the service and the worker processes) and the robots each plans.",
+                "responses": { "200": ok("Workers, sorted by id.", json!({ "type": "array", "items": r("Worker") })), "401": err("Unauthorized") }
             } },
             "/api/v1/robots/{id}": { "get": {
                 "summary": "One robot.",

@@ -1,5 +1,5 @@
-//! Robot routes: the registry as the fleet sees it, and each robot's latest LPE image and
-//! camera frame.
+//! Robot routes: the registry as the fleet sees it, each robot's latest LPE image and camera
+//! frame, and the replanning workers that plan the robots.
 
 use axum::extract::{Path as UrlPath, State};
 use axum::http::header;
@@ -9,11 +9,16 @@ use protocol::RobotId;
 
 use super::error::ApiError;
 use super::state::AppState;
-use crate::fleet::RobotView;
+use crate::fleet::{RobotView, WorkerView};
 
 /// `GET /api/v1/robots`, sorted by id.
 pub async fn list(State(state): State<AppState>) -> Json<Vec<RobotView>> {
     Json(state.fleet.robots())
+}
+
+/// `GET /api/v1/workers`, sorted by id.
+pub async fn workers(State(state): State<AppState>) -> Json<Vec<WorkerView>> {
+    Json(state.fleet.workers())
 }
 
 /// `GET /api/v1/robots/{id}`.
