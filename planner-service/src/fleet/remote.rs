@@ -28,7 +28,7 @@ use protocol::{
     WireMessage, WorkerId,
 };
 use serde::{Deserialize, Serialize};
-use tokio::sync::watch;
+use tokio::sync::{watch, Semaphore};
 use zenoh::liveliness::LivelinessToken;
 use zenoh::pubsub::Subscriber;
 use zenoh::sample::{Sample, SampleKind};
@@ -228,6 +228,8 @@ pub struct WorkerNode {
     io: Mutex<WorkerIo>,
     seq: AtomicU64,
     cycles: AtomicU64,
+    /// One plan at a time per core this process may use (its affinity, e.g. `taskset`).
+    planning_slots: Arc<Semaphore>,
 }
 
 impl WorkerNode {
@@ -267,6 +269,9 @@ impl WorkerNode {
             io: Mutex::new(WorkerIo::default()),
             seq: AtomicU64::new(0),
             cycles: AtomicU64::new(0),
+            planning_slots: Arc::new(Semaphore::new(
+                std::thread::available_parallelism().map_or(1, std::num::NonZero::get),
+            )),
         });
         let me = Arc::downgrade(&node);
         let members = node
@@ -501,6 +506,10 @@ impl CycleHost for WorkerNode {
             latency_ms: received.elapsed().as_secs_f64() * 1e3,
             ..IntentionView::of(intention)
         })
+    }
+
+    fn planning_slots(&self) -> Option<&Arc<Semaphore>> {
+        Some(&self.planning_slots)
     }
 
     fn finish(&self, id: &RobotId, outcome: Outcome) {

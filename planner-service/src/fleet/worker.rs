@@ -23,7 +23,7 @@ use planning::{
     PlannerConfig, PlanningMap,
 };
 use protocol::{Header, Intention, MapName, PoseEstimate, RobotId, SiteId, TaskId};
-use tokio::sync::watch;
+use tokio::sync::{watch, Semaphore};
 use zenoh::Session;
 
 use super::book::Decision;
@@ -92,6 +92,11 @@ pub(crate) trait CycleHost: Send + Sync + 'static {
     ) -> Option<IntentionView>;
     /// The cycle's end, for the task book.
     fn finish(&self, id: &RobotId, outcome: Outcome);
+    /// At most this many plans at once (a worker process: its cores), with [`Self::begin`]
+    /// asked outside them; `None`: no cap, the whole cycle in one go.
+    fn planning_slots(&self) -> Option<&Arc<Semaphore>> {
+        None
+    }
 }
 
 /// The running worker of one robot: its pose slot and its task.
@@ -186,12 +191,39 @@ async fn run<H: CycleHost>(
             break;
         };
         let robot = id.clone();
-        match tokio::task::spawn_blocking(move || {
-            cycle(h.as_ref(), &robot, &arrival, &mut st);
-            st
-        })
-        .await
-        {
+        let done = match h.planning_slots().cloned() {
+            None => {
+                tokio::task::spawn_blocking(move || {
+                    if let Some(c) = h.begin(&robot, &arrival.pose) {
+                        plan(h.as_ref(), &robot, &arrival, c, &mut st);
+                    }
+                    st
+                })
+                .await
+            }
+            Some(slots) => {
+                // The question waits on the network, not on a core: asked outside the slots,
+                // so that a hundred waiting cycles never crowd out the thread that receives
+                // the answers.
+                let (asker, asked, pose) = (Arc::clone(&h), robot.clone(), arrival.pose.clone());
+                match tokio::task::spawn_blocking(move || asker.begin(&asked, &pose)).await {
+                    Ok(Some(c)) => {
+                        let Ok(slot) = slots.acquire_owned().await else {
+                            break;
+                        };
+                        tokio::task::spawn_blocking(move || {
+                            let _slot = slot;
+                            plan(h.as_ref(), &robot, &arrival, c, &mut st);
+                            st
+                        })
+                        .await
+                    }
+                    Ok(None) => Ok(st),
+                    Err(e) => Err(e),
+                }
+            }
+        };
+        match done {
             Ok(st) => state = Some(st),
             Err(e) => {
                 tracing::error!(robot = %id, "replanning worker failed: {e}");
@@ -201,13 +233,11 @@ async fn run<H: CycleHost>(
     }
 }
 
-/// One replanning cycle of one robot for the pose that just arrived (blocking pool): the task
-/// brought up to date by the host, the plan made, the intention sent, the outcome reported.
-fn cycle(host: &impl CycleHost, id: &RobotId, arrival: &Arrival, st: &mut Pipeline) {
+/// The rest of one replanning cycle of one robot (blocking pool), once the host has brought
+/// its task up to date for the pose (`cycle`): the plan made, the intention sent, the outcome
+/// reported.
+fn plan(host: &impl CycleHost, id: &RobotId, arrival: &Arrival, cycle: Cycle, st: &mut Pipeline) {
     let pose = &arrival.pose;
-    let Some(cycle) = host.begin(id, pose) else {
-        return;
-    };
     let Decision::Plan { task, goals, next } = cycle.decision else {
         let stop = stop_intention(host.header(), pose, None, 0);
         let sent = host.send_intention(id, &stop, arrival.received);
