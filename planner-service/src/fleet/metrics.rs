@@ -20,14 +20,71 @@ pub const LATENCY_BUCKETS_S: [f64; 12] = [
 /// Who planned a cycle in the per-worker metrics: the service process itself.
 pub const SERVICE_WORKER: &str = "service";
 
+/// A latency histogram on [`LATENCY_BUCKETS_S`], with its count and sum.
+#[derive(Debug, Default)]
+struct LatencyHistogram {
+    buckets: [AtomicU64; LATENCY_BUCKETS_S.len()],
+    count: AtomicU64,
+    sum_ns: AtomicU64,
+}
+
+impl LatencyHistogram {
+    fn observe(&self, latency: Duration) {
+        let s = latency.as_secs_f64();
+        for (bucket, le) in self.buckets.iter().zip(LATENCY_BUCKETS_S) {
+            if s <= le {
+                bucket.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+        self.count.fetch_add(1, Ordering::Relaxed);
+        let ns = u64::try_from(latency.as_nanos()).unwrap_or(u64::MAX);
+        self.sum_ns.fetch_add(ns, Ordering::Relaxed);
+    }
+
+    /// Mean of the observations in milliseconds (0 before the first).
+    fn mean_ms(&self) -> f64 {
+        let n = self.count.load(Ordering::Relaxed);
+        #[allow(clippy::cast_precision_loss)]
+        if n == 0 {
+            0.0
+        } else {
+            self.sum_ns.load(Ordering::Relaxed) as f64 / n as f64 / 1e6
+        }
+    }
+
+    /// Writes the bucket, sum and count lines of `name`; `labels` go before `le`.
+    fn render(&self, out: &mut String, name: &str, labels: &str) {
+        let sep = if labels.is_empty() { "" } else { "," };
+        for (bucket, le) in self.buckets.iter().zip(LATENCY_BUCKETS_S) {
+            let _ = writeln!(
+                out,
+                "{name}_bucket{{{labels}{sep}le=\"{le}\"}} {}",
+                bucket.load(Ordering::Relaxed)
+            );
+        }
+        let count = self.count.load(Ordering::Relaxed);
+        #[allow(clippy::cast_precision_loss)]
+        let sum_s = self.sum_ns.load(Ordering::Relaxed) as f64 / 1e9;
+        let braces = if labels.is_empty() {
+            String::new()
+        } else {
+            format!("{{{labels}}}")
+        };
+        let _ = writeln!(
+            out,
+            "{name}_bucket{{{labels}{sep}le=\"+Inf\"}} {count}\n\
+             {name}_sum{braces} {sum_s}\n\
+             {name}_count{braces} {count}"
+        );
+    }
+}
+
 /// One worker's replans and their latency.
 #[derive(Debug, Default)]
 pub struct WorkerStats {
     replans: AtomicU64,
     failures: AtomicU64,
-    latency_buckets: [AtomicU64; LATENCY_BUCKETS_S.len()],
-    latency_count: AtomicU64,
-    latency_sum_ns: AtomicU64,
+    latency: LatencyHistogram,
 }
 
 impl WorkerStats {
@@ -39,12 +96,7 @@ impl WorkerStats {
             }
         }
         if let Some(l) = latency {
-            observe(
-                &self.latency_buckets,
-                &self.latency_count,
-                &self.latency_sum_ns,
-                l,
-            );
+            self.latency.observe(l);
         }
     }
 
@@ -61,64 +113,8 @@ impl WorkerStats {
     /// Mean pose-to-intention latency of the worker's cycles (0 before the first).
     #[must_use]
     pub fn mean_latency_ms(&self) -> f64 {
-        let n = self.latency_count.load(Ordering::Relaxed);
-        #[allow(clippy::cast_precision_loss)]
-        if n == 0 {
-            0.0
-        } else {
-            self.latency_sum_ns.load(Ordering::Relaxed) as f64 / n as f64 / 1e6
-        }
+        self.latency.mean_ms()
     }
-}
-
-fn observe(
-    buckets: &[AtomicU64; LATENCY_BUCKETS_S.len()],
-    count: &AtomicU64,
-    sum_ns: &AtomicU64,
-    latency: Duration,
-) {
-    let s = latency.as_secs_f64();
-    for (bucket, le) in buckets.iter().zip(LATENCY_BUCKETS_S) {
-        if s <= le {
-            bucket.fetch_add(1, Ordering::Relaxed);
-        }
-    }
-    count.fetch_add(1, Ordering::Relaxed);
-    let ns = u64::try_from(latency.as_nanos()).unwrap_or(u64::MAX);
-    sum_ns.fetch_add(ns, Ordering::Relaxed);
-}
-
-/// Writes one histogram's bucket, sum and count lines; `labels` go before `le`.
-fn render_histogram(
-    out: &mut String,
-    name: &str,
-    labels: &str,
-    buckets: &[AtomicU64; LATENCY_BUCKETS_S.len()],
-    count: &AtomicU64,
-    sum_ns: &AtomicU64,
-) {
-    let sep = if labels.is_empty() { "" } else { "," };
-    for (bucket, le) in buckets.iter().zip(LATENCY_BUCKETS_S) {
-        let _ = writeln!(
-            out,
-            "{name}_bucket{{{labels}{sep}le=\"{le}\"}} {}",
-            bucket.load(Ordering::Relaxed)
-        );
-    }
-    let count = count.load(Ordering::Relaxed);
-    #[allow(clippy::cast_precision_loss)]
-    let sum_s = sum_ns.load(Ordering::Relaxed) as f64 / 1e9;
-    let braces = if labels.is_empty() {
-        String::new()
-    } else {
-        format!("{{{labels}}}")
-    };
-    let _ = writeln!(
-        out,
-        "{name}_bucket{{{labels}{sep}le=\"+Inf\"}} {count}\n\
-         {name}_sum{braces} {sum_s}\n\
-         {name}_count{braces} {count}"
-    );
 }
 
 /// The fleet's metrics.
@@ -130,9 +126,7 @@ pub struct FleetMetrics {
     replan_failures_total: AtomicU64,
     replans_reused_total: AtomicU64,
     intentions_total: AtomicU64,
-    latency_buckets: [AtomicU64; LATENCY_BUCKETS_S.len()],
-    latency_count: AtomicU64,
-    latency_sum_ns: AtomicU64,
+    latency: LatencyHistogram,
     robots_online: AtomicI64,
     robots_offline: AtomicI64,
     tasks: [AtomicI64; TaskStateKind::ALL.len()],
@@ -160,12 +154,7 @@ impl FleetMetrics {
     /// One intention left the service `latency` after the pose it answers arrived.
     pub fn record_intention(&self, latency: Duration) {
         self.intentions_total.fetch_add(1, Ordering::Relaxed);
-        observe(
-            &self.latency_buckets,
-            &self.latency_count,
-            &self.latency_sum_ns,
-            latency,
-        );
+        self.latency.observe(latency);
     }
 
     /// A cycle planned by `worker`: its intention's latency (if one went out) and whether a
@@ -254,14 +243,7 @@ impl FleetMetrics {
             "# HELP fleet_replan_latency_seconds Pose received to intention published.\n\
              # TYPE fleet_replan_latency_seconds histogram"
         );
-        render_histogram(
-            out,
-            "fleet_replan_latency_seconds",
-            "",
-            &self.latency_buckets,
-            &self.latency_count,
-            &self.latency_sum_ns,
-        );
+        self.latency.render(out, "fleet_replan_latency_seconds", "");
         self.render_workers(out);
         let _ = writeln!(
             out,
@@ -315,13 +297,10 @@ impl FleetMetrics {
              # TYPE fleet_worker_replan_latency_seconds histogram"
         );
         for (name, w) in &workers {
-            render_histogram(
+            w.latency.render(
                 out,
                 "fleet_worker_replan_latency_seconds",
                 &format!("worker=\"{name}\""),
-                &w.latency_buckets,
-                &w.latency_count,
-                &w.latency_sum_ns,
             );
         }
         let _ = writeln!(
