@@ -181,6 +181,10 @@ impl FleetMetrics {
             .workers
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner);
+        // Every cycle comes here: allocate the name only for a worker not seen before.
+        if let Some(stats) = workers.get(worker) {
+            return Arc::clone(stats);
+        }
         Arc::clone(workers.entry(worker.to_string()).or_default())
     }
 
