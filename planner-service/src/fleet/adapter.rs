@@ -402,7 +402,7 @@ fn encode<M: WireMessage>(msg: &M) -> Result<Vec<u8>, FleetError> {
 }
 
 /// Encodes and puts a message from synchronous code (the blocking pool).
-fn put_sync<M: WireMessage>(
+pub(super) fn put_sync<M: WireMessage>(
     session: &Session,
     key: &zenoh::key_expr::OwnedKeyExpr,
     msg: &M,

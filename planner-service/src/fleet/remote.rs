@@ -34,6 +34,7 @@ use zenoh::pubsub::Subscriber;
 use zenoh::sample::{Sample, SampleKind};
 use zenoh::{Session, Wait};
 
+use super::adapter::put_sync;
 use super::core::Cycle;
 use super::error::{zenoh_err, FleetError};
 use super::types::IntentionView;
@@ -410,17 +411,9 @@ impl WorkerNode {
             .send(arrival);
     }
 
+    /// Publishes `msg` on `key`; whether it went out (a failure is logged here).
     fn put<M: WireMessage>(&self, key: &zenoh::key_expr::OwnedKeyExpr, msg: &M) -> bool {
-        let sent = protocol::encode(msg)
-            .map_err(|e| e.to_string())
-            .and_then(|bytes| {
-                self.session
-                    .put(key, bytes)
-                    .encoding(protocol::zenoh_io::encoding_for::<M>())
-                    .wait()
-                    .map_err(|e| e.to_string())
-            });
-        match sent {
+        match put_sync(&self.session, key, msg) {
             Ok(()) => true,
             Err(e) => {
                 tracing::warn!(key = %key, "cannot publish: {e}");
