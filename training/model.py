@@ -34,11 +34,13 @@ import torch
 from torch import nn
 
 KINDS = ("dlm", "lpe", "none")
-BACKBONES = ("small", "resnet50")
+BACKBONES = ("small", "small-spatial", "resnet50")
 LPE_BRANCHES = ("light", "shared", "separate")
 # Channel widths of the small CNN's five convolutions; the light LPE branch is narrower.
 SMALL_WIDTHS = (24, 32, 64, 128, 256)
 LIGHT_WIDTHS = (16, 24, 32, 64, 128)
+# The wider small CNN of `small-spatial` (GPU-trained, still a few ms per frame on one core).
+SPATIAL_WIDTHS = (32, 48, 96, 192, 256)
 INTENTION_DIM = 4  # turn_left, turn_right, go_forward, stop (protocol::Dlm::index)
 INTENTION_EMBED = 64  # the paper expands the 4-d one-hot to 64-d
 HEAD_HIDDEN = 96
@@ -54,25 +56,52 @@ def conv_bn_relu(cin: int, cout: int, kernel: int, stride: int) -> nn.Sequential
     )
 
 
+class SpatialPool(nn.Module):
+    """Global average pool plus a spatial soft-argmax per channel (Levine et al. 2016's
+    "spatial softmax"): for each channel the expected image x and y under a softmax over its
+    map, in [-1, 1]. The average pool says *what* the image holds, the keypoints *where* (a
+    person left or right of the path, how far up the image a door frame reaches), which a
+    plain global average pool throws away. Independent of the input size; exports to plain
+    Softmax/Mul/ReduceSum."""
+
+    def __init__(self, channels: int):
+        super().__init__()
+        # Learned sharpness of the softmax (log scale), one per channel.
+        self.log_temperature = nn.Parameter(torch.zeros(1, channels, 1))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        n, c, h, w = x.shape
+        flat = x.flatten(2)  # [N, C, H*W]
+        att = torch.softmax(flat * torch.exp(self.log_temperature), dim=-1)
+        ys = torch.linspace(-1.0, 1.0, h, device=x.device, dtype=x.dtype)
+        xs = torch.linspace(-1.0, 1.0, w, device=x.device, dtype=x.dtype)
+        gy = ys.view(h, 1).expand(h, w).reshape(1, 1, h * w)
+        gx = xs.view(1, w).expand(h, w).reshape(1, 1, h * w)
+        ex = (att * gx).sum(dim=-1)
+        ey = (att * gy).sum(dim=-1)
+        return torch.cat([flat.mean(dim=-1), ex, ey], dim=1)
+
+
 class SmallCNN(nn.Module):
-    """Five conv-BN-ReLU layers (strides 2, 2, 2, 2, 1) and a global average pool.
+    """Five conv-BN-ReLU layers (strides 2, 2, 2, 2, 1) and a global average pool (or, with
+    `spatial`, the average pool plus per-channel soft-argmax keypoints: 3x the features).
 
     At 96 px the feature maps are 48, 24, 12, 6 and 6 px wide; the last layer's receptive field
     covers the whole image. Works for any input size >= 16 px."""
 
-    def __init__(self, widths: tuple[int, ...] = SMALL_WIDTHS):
+    def __init__(self, widths: tuple[int, ...] = SMALL_WIDTHS, spatial: bool = False):
         super().__init__()
         w = widths
+        pool = [SpatialPool(w[4])] if spatial else [nn.AdaptiveAvgPool2d(1), nn.Flatten()]
         self.features = nn.Sequential(
             conv_bn_relu(3, w[0], 5, 2),
             conv_bn_relu(w[0], w[1], 3, 2),
             conv_bn_relu(w[1], w[2], 3, 2),
             conv_bn_relu(w[2], w[3], 3, 2),
             conv_bn_relu(w[3], w[4], 3, 1),
-            nn.AdaptiveAvgPool2d(1),
-            nn.Flatten(),
+            *pool,
         )
-        self.out_dim = w[4]
+        self.out_dim = w[4] * (3 if spatial else 1)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.features(x)
@@ -102,6 +131,8 @@ class ResNet50(nn.Module):
 def make_backbone(name: str, light: bool = False) -> nn.Module:
     if name == "small":
         return SmallCNN(LIGHT_WIDTHS if light else SMALL_WIDTHS)
+    if name == "small-spatial":
+        return SmallCNN(LIGHT_WIDTHS if light else SPATIAL_WIDTHS, spatial=True)
     if name == "resnet50":
         # A "light" ResNet branch would be a different architecture; the small CNN is the light
         # branch for both backbones.
@@ -191,11 +222,12 @@ def input_names(kind: str) -> list[str]:
 def describe(config: dict) -> str:
     """Free-text backbone description for the card's `backbone` key."""
     b = config.get("backbone", "small")
-    cam = (
-        f"small-cnn 5 conv (widths {'-'.join(map(str, SMALL_WIDTHS))}, BN, ReLU, strides 2-2-2-2-1) + global avg pool"
-        if b == "small"
-        else "resnet50 (torchvision, random init, cut at avg pool, 2048-d)"
-    )
+    cam = {
+        "small": f"small-cnn 5 conv (widths {'-'.join(map(str, SMALL_WIDTHS))}, BN, ReLU, strides 2-2-2-2-1) + global avg pool",
+        "small-spatial": f"small-cnn 5 conv (widths {'-'.join(map(str, SPATIAL_WIDTHS))}, BN, ReLU, strides 2-2-2-2-1) "
+        "+ global avg pool and spatial soft-argmax keypoints per channel",
+        "resnet50": "resnet50 (torchvision, random init, cut at avg pool, 2048-d)",
+    }[b]
     if config["kind"] == "dlm":
         return f"{cam}; intention 4->64; 4 branched MLP heads ({HEAD_HIDDEN} hidden) selected by the one-hot; tanh"
     if config["kind"] == "lpe":
@@ -203,7 +235,8 @@ def describe(config: dict) -> str:
         lpe = {
             "shared": "LPE through the same (siamese, shared) backbone",
             "separate": "LPE through a second backbone of the same architecture (own weights)",
-            "light": f"LPE through a separate light small-cnn (widths {'-'.join(map(str, LIGHT_WIDTHS))})",
+            "light": f"LPE through a separate light small-cnn (widths {'-'.join(map(str, LIGHT_WIDTHS))}"
+            + (", avg pool and keypoints)" if b == "small-spatial" else ")"),
         }[branch]
         return f"{cam}; {lpe}; concatenated, MLP (128 hidden); tanh"
     return f"{cam}; MLP (128 hidden); tanh"

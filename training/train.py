@@ -76,7 +76,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--randomize-intention", type=float,
                    help="DLM: probability of a random intention on go_forward frames with |omega| < 0.1 (default 0.2; paper 0)")
     p.add_argument("--val-fraction", type=float, default=0.2, help="share of samples (whole episodes) for validation")
-    p.add_argument("--backbone", default="small", choices=model.BACKBONES, help="small CNN (CPU) or resnet50 (GPU, needs torchvision)")
+    p.add_argument("--backbone", default="small", choices=model.BACKBONES, help="small CNN (CPU), small-spatial (wider, average pool + soft-argmax keypoints; for GPU training, CPU inference) or resnet50 (GPU, needs torchvision)")
     p.add_argument("--lpe-branch", default="light", choices=model.LPE_BRANCHES,
                    help="LPE-Net: light separate CNN (default), shared siamese backbone (paper), or separate full backbone")
     p.add_argument("--seed", type=int, default=1)

@@ -217,6 +217,11 @@ pub struct RecordArgs {
     /// Samples to record in all.
     #[arg(long, default_value_t = 100_000)]
     samples: usize,
+    /// Wall-clock budget in minutes: no new batch of episodes starts after it, and the
+    /// recording is written with the whole episodes it has (then exactly the recording of
+    /// `--samples K`, K what it got, with that dataset id).
+    #[arg(long)]
+    max_minutes: Option<f64>,
     /// Probability that an episode carries steering noise (labels stay the expert's).
     #[arg(long, default_value_t = 0.2)]
     noise: f64,
@@ -299,6 +304,7 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
             .as_deref()
             .map(|model| crate::record::Policy::load(model, args.beta))
             .transpose()?,
+        max_wall_s: args.max_minutes.map(|m| m * 60.0),
         run: TableOptions {
             agent: read_agent_config(args.config.as_deref())?,
             record: record_settings(args.record_dir.as_deref(), args.record_camera),

@@ -452,3 +452,29 @@ fn the_command_line_records_a_run_log_per_episode() {
     record(&o, plain.path(), &|_| {}).unwrap();
     assert_eq!(read_all(plain.path()).1, fields);
 }
+
+#[test]
+fn a_recording_cut_by_its_wall_budget_is_the_recording_of_its_sample_count() {
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let mut o = options(0.5, 2);
+    o.samples = 100_000;
+    // Past the budget at once: the first batch of episodes runs, then the recording stops.
+    o.max_wall_s = Some(1e-9);
+    let cut = record(&o, a.path(), &|_| {}).unwrap();
+    assert!(cut.samples > 0 && cut.samples < 100_000, "{}", cut.samples);
+    o.max_wall_s = None;
+    o.samples = cut.samples;
+    let full = record(&o, b.path(), &|_| {}).unwrap();
+    assert_eq!(full.samples, cut.samples);
+    assert_eq!(full.dataset_id, cut.dataset_id);
+    let (ia, fa) = read_all(a.path());
+    let (ib, fb) = read_all(b.path());
+    assert_eq!(ia["dataset_id"], ib["dataset_id"]);
+    assert_eq!(ia["samples"], ib["samples"]);
+    assert_eq!(ia["stopped_by_max_wall_s"], serde_json::json!(1e-9));
+    assert!(ib.get("stopped_by_max_wall_s").is_none());
+    assert_eq!(fa, fb);
+    o.max_wall_s = Some(-1.0);
+    let err = record(&o, b.path(), &|_| {}).unwrap_err().to_string();
+    assert!(err.contains("max_wall_s") && err.contains("-1"), "{err}");
+}

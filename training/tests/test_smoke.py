@@ -98,20 +98,22 @@ def run(cmd: list[str]) -> str:
     return p.stdout
 
 
-def check_kind(kind: str, data_dir: Path, out: Path, seconds: float) -> dict:
+def check_kind(kind: str, data_dir: Path, out: Path, seconds: float, backbone: str = "small") -> dict:
     import onnxruntime as ort
 
     index = json.loads((data_dir / "index.json").read_text())
     px = index["fields"]["camera"]["shape"][0]
     lpe_px = index["fields"]["lpe"]["shape"][0]
     run([sys.executable, "-m", "training.train", "--kind", kind, "--data", str(data_dir), "--out", str(out),
-         "--minutes", str(seconds / 60), "--threads", "1", "--seed", "3"])
+         "--minutes", str(seconds / 60), "--threads", "1", "--seed", "3", "--backbone", backbone])
     for f in ("checkpoint_best.pt", "checkpoint_last.pt", "history.json", "loss.png", "card.json", f"{kind}.onnx", "summary.json"):
         assert (out / f).is_file(), f"{out / f} missing"
     sess = ort.InferenceSession(str(out / f"{kind}.onnx"), providers=["CPUExecutionProvider"])
     card = dict(sess.get_modelmeta().custom_metadata_map)
     card_mod.check(card)
     assert card["kind"] == kind and card["dataset_id"] == index["dataset_id"], card
+    if backbone == "small-spatial":
+        assert "keypoints" in card["backbone"] and "keypoints" in card["deviations"], card
     assert (card["image_width_px"], card["image_height_px"]) == (str(px), str(px)), card
     assert float(card["max_speed_mps"]) == index["max_speed_mps"] and float(card["max_turn_radps"]) == index["max_turn_radps"]
     for extra in ("recipe", "deviations", "train_loss", "per_intention_val_l1", "samples_seen", "training_minutes", "parameters"):
@@ -129,7 +131,7 @@ def check_kind(kind: str, data_dir: Path, out: Path, seconds: float) -> dict:
     diff = float(recorded["onnx_max_abs_diff"])
     assert diff <= 1e-4, diff
     summary = json.loads((out / "summary.json").read_text())
-    return {"kind": kind, "max_abs_diff": diff, "val_loss": float(card["validation_loss"]),
+    return {"kind": kind, "backbone": backbone, "max_abs_diff": diff, "val_loss": float(card["validation_loss"]),
             "epochs": summary["epochs"], "samples_per_s": summary["train_samples_per_s"]}
 
 
@@ -142,12 +144,14 @@ def smoke(seconds: float = 30.0, data: str | None = None, keep: str | None = Non
             write_synthetic(data_dir)
         print(run([sys.executable, "training/dataset.py", str(data_dir)]))
         results = [check_kind(k, data_dir, work / k, seconds) for k in ("dlm", "lpe", "none")]
+        # The GPU round's backbone (average pool + soft-argmax keypoints) trains and exports too.
+        results.append(check_kind("lpe", data_dir, work / "lpe-spatial", min(seconds, 15.0), backbone="small-spatial"))
         # The export command on its own, from a checkpoint.
         run([sys.executable, "-m", "training.export", "--checkpoint", str(work / "dlm" / "checkpoint_last.pt"),
              "--out", str(work / "reexport" / "dlm.onnx"), "--threads", "1"])
         assert (work / "reexport" / "dlm.onnx").is_file()
     for r in results:
-        print(f"smoke {r['kind']}: {r['epochs']} epochs, {r['samples_per_s']} samples/s, "
+        print(f"smoke {r['kind']} ({r['backbone']}): {r['epochs']} epochs, {r['samples_per_s']} samples/s, "
               f"val loss {r['val_loss']:.4f}, onnxruntime vs torch max |diff| {r['max_abs_diff']:.2e}")
     return results
 

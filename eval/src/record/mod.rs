@@ -93,6 +93,10 @@ pub struct RecordOptions {
     /// A DAgger round: the learner that drives (mixed with the expert by its β); `None`: the
     /// expert drives.
     pub policy: Option<Policy>,
+    /// Wall-clock budget: no new batch of episodes starts after it. A recording that stops on
+    /// it holds whole episodes, K samples, and is exactly the recording of `samples = K` (same
+    /// files, same dataset id), so it is as reproducible as one that ran to its count.
+    pub max_wall_s: Option<f64>,
     /// Shared run settings (the expert's and the agent's configuration, the cycle). With
     /// `run.record` every episode also writes a run log, named after its episode number;
     /// the episodes of the last batch that the sample budget cuts off keep theirs too.
@@ -117,6 +121,7 @@ impl Default for RecordOptions {
             episode_s: 120.0,
             shard_samples: 5000,
             policy: None,
+            max_wall_s: None,
             run: TableOptions::default(),
             command: String::new(),
         }
@@ -241,6 +246,15 @@ impl RecordOptions {
                 "must be at least 1 s",
             ));
         }
+        if let Some(w) = self.max_wall_s {
+            if !(w.is_finite() && w > 0.0) {
+                return Err(invalid(
+                    "max_wall_s",
+                    w.to_string(),
+                    "need a positive number of seconds",
+                ));
+            }
+        }
         if self.shard_samples == 0 {
             return Err(invalid("shard_samples", "0".into(), "need at least one"));
         }
@@ -270,12 +284,15 @@ impl RecordOptions {
             .iter()
             .map(|&seed| prepare_generated(seed, &self.run))
             .collect::<Result<Vec<_>, _>>()?;
-        self.dataset_id_with(&generated)
+        self.dataset_id_with(generated.iter())
     }
 
     /// [`RecordOptions::dataset_id`] with the generated buildings already made: their
     /// scenarios and plans are hashed, so a change of the generator is a new dataset.
-    fn dataset_id_with(&self, generated: &[Prepared]) -> Result<String, RecordError> {
+    fn dataset_id_with<'a>(
+        &self,
+        generated: impl Iterator<Item = &'a Prepared>,
+    ) -> Result<String, RecordError> {
         let mut h = Sha256::new();
         h.update(
             format!(
@@ -549,7 +566,7 @@ pub fn record(
         .iter()
         .map(|&seed| prepare_generated(seed, &options.run))
         .collect::<Result<Vec<_>, _>>()?;
-    let dataset_id = options.dataset_id_with(&generated)?;
+    let mut dataset_id = options.dataset_id_with(generated.iter())?;
     let files = options
         .scenarios
         .iter()
@@ -582,7 +599,16 @@ pub fn record(
     let mut next_episode = 0u64;
     // Episodes that give nothing (no room, blocked start) must not loop for ever.
     let mut empty_in_a_row = 0usize;
+    let mut out_of_time = false;
     while writer.samples() < options.samples {
+        if options
+            .max_wall_s
+            .is_some_and(|budget| started.elapsed().as_secs_f64() >= budget)
+            && writer.samples() > 0
+        {
+            out_of_time = true;
+            break;
+        }
         let remaining = options.samples - writer.samples();
         let batch: Vec<u64> = (next_episode..next_episode + options.jobs as u64).collect();
         next_episode += options.jobs as u64;
@@ -642,7 +668,27 @@ pub fn record(
             }
         }
     }
+    // Stopped by the budget at an episode boundary: the files are those of `samples = K`;
+    // the id and the index say so, so the same data always has the same id.
+    let cut;
+    let options = if out_of_time {
+        cut = RecordOptions {
+            samples: writer.samples(),
+            ..options.clone()
+        };
+        dataset_id = cut.dataset_id_with(
+            loaded[options.scenarios.len()..]
+                .iter()
+                .map(|l| &l.prepared),
+        )?;
+        &cut
+    } else {
+        options
+    };
     let mut header = index_header(options, &dataset_id, &loaded);
+    if out_of_time {
+        header["stopped_by_max_wall_s"] = serde_json::json!(options.max_wall_s);
+    }
     header["encounters"] = serde_json::json!({
         "probability": options.encounters,
         "episodes": encounters,
