@@ -44,7 +44,7 @@ import onnxruntime as ort
 from PIL import Image
 
 from training import card as card_mod
-from training.check_frames import normalize
+from training.check_frames import normalize, sized
 
 TOLERANCE = 1e-4
 INTENTIONS = ("turn_left", "turn_right", "go_forward", "stop")  # protocol::Dlm::index
@@ -177,6 +177,13 @@ def feeds_for(frame: dict, kind: str, meta: dict[str, str]) -> dict[str, np.ndar
     return feeds
 
 
+def to_card_size(frames: list[dict], kind: str, meta: dict[str, str]) -> list[dict]:
+    """The frames resized to the card's input sizes with the agent's area average (the check
+    frames are stored at the largest model's size; expected.json was computed the same way)."""
+    return [dict(f, camera=sized(f["camera"], meta, "camera"),
+                 lpe=sized(f["lpe"], meta, "lpe") if kind == "lpe" else f["lpe"]) for f in frames]
+
+
 def check_sizes(frames: list[dict], kind: str, meta: dict[str, str]) -> None:
     h, w = int(meta["image_height_px"]), int(meta["image_width_px"])
     cam = frames[0]["camera"].shape[:2]
@@ -256,7 +263,7 @@ def render(model_path: str | Path, frames_dir: str | Path, out: str | Path, rows
     chosen = cam_layers + lpe_layers
     sess = session_with_outputs(proto, [layer["tensor"] for layer in chosen])
 
-    frames = load_frames(Path(frames_dir))
+    frames = to_card_size(load_frames(Path(frames_dir)), kind, meta)
     check_sizes(frames, kind, meta)
     names = ["control"] + [layer["tensor"] for layer in chosen]
     results, worst = {}, 0.0

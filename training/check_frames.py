@@ -7,7 +7,9 @@ From a recording it takes, deterministically, 12 validation-style frames (3 wher
 left under a turn_left intention, 3 turning right under turn_right, 3 go_forward, 3 at random),
 stores each camera and LPE image as a PNG at the recorded size (what the agent's area-average
 resize of a 224 px frame gives), and runs every shipped model (`<models>/{dlm,lpe,none}.onnx`)
-on them with onnxruntime, through the card's normalization. `expected.json` holds, per frame,
+on them with onnxruntime, through the agent's area-average resize to the model's card size
+(`resize_area`, a port of `preprocess::resize_area_rgb8`; models of different sizes share the
+frames) and the card's normalization. `expected.json` holds, per frame,
 the files, the recorded intention, the expert's label and each model's output. The Rust test
 must reproduce those outputs to 1e-4 through the agent's own preprocessing (the contract) and
 checks the models' turning against the expert's (the behaviour).
@@ -24,6 +26,7 @@ import numpy as np
 import onnxruntime as ort
 from PIL import Image
 
+from training import card as card_mod
 from training import dataset
 
 KINDS = ("dlm", "lpe", "none")
@@ -60,6 +63,53 @@ def pick(ds: dataset.Dataset) -> list[int]:
         if taken < PER_GROUP:
             raise SystemExit(f"only {taken} frames of group {len(chosen) // PER_GROUP} in distinct episodes")
     return chosen
+
+
+def _taps(src: int, dst: int) -> list[list[tuple[int, np.float32]]]:
+    """For each output index the source indices it covers and their weights (the agent's taps)."""
+    scale = src / dst
+    out = []
+    for o in range(dst):
+        a, b = o * scale, (o + 1) * scale
+        first, last = int(np.floor(a)), min(int(np.ceil(b)), src)
+        row = []
+        for i in range(first, last):
+            overlap = (min(b, i + 1) - max(a, i)) / scale
+            if overlap > 1e-9:
+                row.append((i, np.float32(overlap)))
+        out.append(row)
+    return out
+
+
+def resize_area(img_u8: np.ndarray, out_w: int, out_h: int) -> np.ndarray:
+    """HWC uint8 resized by area average exactly as the agent's `resize_area_rgb8`: rows first
+    into f32 (weights added in the same order), then columns, rounded half away from zero."""
+    h, w, _ = img_u8.shape
+    if (w, h) == (out_w, out_h):
+        return img_u8
+    src = img_u8.astype(np.float32)
+    rows = np.zeros((h, out_w, 3), np.float32)
+    for ox, taps in enumerate(_taps(w, out_w)):
+        acc = np.zeros((h, 3), np.float32)
+        for i, wt in taps:
+            acc = acc + wt * src[:, i, :]
+        rows[:, ox, :] = acc
+    out = np.zeros((out_h, out_w, 3), np.float32)
+    for oy, taps in enumerate(_taps(h, out_h)):
+        acc = np.zeros((out_w, 3), np.float32)
+        for i, wt in taps:
+            acc = acc + wt * rows[i]
+        out[oy] = acc
+    return np.clip(np.floor(out + np.float32(0.5)), 0, 255).astype(np.uint8)
+
+
+def sized(img_u8: np.ndarray, meta: dict[str, str], key: str) -> np.ndarray:
+    """The image at the size the model's card asks for (`image_width_px`, or for the LPE image
+    `lpe_image_px`, else the rendering's size)."""
+    if key == "lpe":
+        px = card_mod.lpe_input_px(meta)
+        return resize_area(img_u8, px, px)
+    return resize_area(img_u8, int(meta["image_width_px"]), int(meta["image_height_px"]))
 
 
 def normalize(img_u8: np.ndarray, meta: dict[str, str]) -> np.ndarray:
@@ -104,13 +154,13 @@ def main(argv=None) -> int:
         }
         for kind, sess in sessions.items():
             meta = sess.get_modelmeta().custom_metadata_map
-            feeds = {"camera": normalize(camera, meta)}
+            feeds = {"camera": normalize(sized(camera, meta, "camera"), meta)}
             if kind == "dlm":
                 one_hot = np.zeros((1, 4), dtype=np.float32)
                 one_hot[0, dlm] = 1.0
                 feeds["intention"] = one_hot
             elif kind == "lpe":
-                feeds["lpe"] = normalize(lpe, meta)
+                feeds["lpe"] = normalize(sized(lpe, meta, "lpe"), meta)
             entry["outputs"][kind] = [float(v) for v in sess.run(["control"], feeds)[0][0]]
         frames.append(entry)
     doc = {
