@@ -1,5 +1,6 @@
 //! Time per control step of the intention-net controllers on ONNX Runtime (the fixture models
-//! of models/fixtures, 224x224 camera), with 1 and 2 intra-op threads; preprocessing alone
+//! of models/fixtures, 224x224 camera, and the shipped trained models of models/, which resize
+//! the 224 px frame to their card's size), with 1 and 2 intra-op threads; preprocessing alone
 //! (decode + normalize, no inference) is measured beside it so the inference share is visible.
 //!
 //! Needs the ONNX Runtime library from `bash scripts/setup.sh` (or ORT_DYLIB_PATH).
@@ -49,9 +50,10 @@ fn intention(lpe: Option<Image>) -> Intention {
     }
 }
 
-fn load(file: &str, kind: ControllerKind, threads: usize) -> IntentionNet {
+fn load(dir: &str, file: &str, kind: ControllerKind, threads: usize) -> IntentionNet {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../models/fixtures")
+        .join("../models")
+        .join(dir)
         .join(file);
     let expect = ModelExpectation::new(kind, Limits::default()).unwrap();
     IntentionNet::load(
@@ -93,9 +95,10 @@ fn bench(c: &mut Criterion) {
         .warm_up_time(Duration::from_secs(1))
         .measurement_time(Duration::from_secs(3));
     for threads in [1, 2] {
-        for (name, file, kind, camera, intention) in [
+        for (name, dir, file, kind, camera, intention) in [
             (
                 "dlm rgb8",
+                "fixtures",
                 "dlm.onnx",
                 ControllerKind::Dlm,
                 &raw,
@@ -103,6 +106,7 @@ fn bench(c: &mut Criterion) {
             ),
             (
                 "dlm png",
+                "fixtures",
                 "dlm.onnx",
                 ControllerKind::Dlm,
                 &encoded,
@@ -110,13 +114,30 @@ fn bench(c: &mut Criterion) {
             ),
             (
                 "lpe rgb8",
+                "fixtures",
+                "lpe.onnx",
+                ControllerKind::Lpe,
+                &raw,
+                &lpe_intention,
+            ),
+            (
+                "shipped dlm rgb8",
+                ".",
+                "dlm.onnx",
+                ControllerKind::Dlm,
+                &raw,
+                &dlm_intention,
+            ),
+            (
+                "shipped lpe rgb8",
+                ".",
                 "lpe.onnx",
                 ControllerKind::Lpe,
                 &raw,
                 &lpe_intention,
             ),
         ] {
-            let mut net = load(file, kind, threads);
+            let mut net = load(dir, file, kind, threads);
             let step = input(camera, intention);
             group.bench_function(
                 BenchmarkId::new(name, format!("{threads} thread(s)")),
@@ -126,7 +147,9 @@ fn bench(c: &mut Criterion) {
             );
         }
     }
-    let card = load("dlm.onnx", ControllerKind::Dlm, 1).card().clone();
+    let card = load("fixtures", "dlm.onnx", ControllerKind::Dlm, 1)
+        .card()
+        .clone();
     let mut buf = vec![0.0_f32; 3 * (SIZE_PX * SIZE_PX) as usize];
     for (name, frame) in [("rgb8", &raw), ("png", &encoded)] {
         group.bench_function(BenchmarkId::new("preprocess only", name), |b| {
