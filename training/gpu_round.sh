@@ -1,19 +1,23 @@
 #!/usr/bin/env bash
-# One learning round on a machine with many cores and a GPU, inside a fixed wall budget:
+# Learning rounds on a machine with many cores and a GPU, inside a fixed wall budget. Each round:
 # record (a DAgger recording with the current LPE-Net driving and an expert recording, both with
-# the §4.2 encounters, in parallel on all cores) and then train LPE-Net (small and small-spatial
-# backbones) and DLM-Net (small-spatial) on both recordings at once on the one GPU, export each
-# with its card. Everything it made goes into one tar per model under $ROUND_OUT, plus logs.tar.
+# the §4.2 encounters, in parallel on all cores), then train every model of MODELS at once on the
+# one GPU on all the rounds' recordings so far (aggregated, as DAgger prescribes), warm-started
+# from the previous round's checkpoint, and export each with its card. The next round's DAgger
+# recording is driven by this round's DRIVER model. The last round's models go into one tar per
+# model under $ROUND_OUT, plus logs.tar (every round's logs and summaries).
 #
 # Run from the repository root with a built eval binary and an ONNX Runtime library:
 #   EVAL=target/release/eval ORT_DYLIB_PATH=/path/libonnxruntime.so.X \
 #     ROUND_OUT=/tmp/round bash training/gpu_round.sh
-# Knobs (environment): RECORD_MIN (3.5), TRAIN_MIN (3.5), IMAGE_PX (128), JOBS (cores / 2 per
-# recording), POLICY (models/lpe.onnx), GEN (200 generated buildings per recording), SEED (61),
-# DATA (data/round), PY (python3), TRAIN_WORKERS (cores / 3 - 1 per run), MODELS
-# ("lpe:small lpe:small-spatial dlm:small-spatial"), INIT_DIR (warm start: <INIT_DIR>/<kind>-<backbone>/
-# checkpoint_best.pt where it exists, e.g. the previous round's), LR (1e-3), GEN_FIRST (1000 and
-# GEN_FIRST + 2000 for the expert recording: keep rounds on different buildings).
+# Knobs (environment): ROUNDS (1), RECORD_MIN (3.5, per round), TRAIN_MIN (3.5, per round),
+# IMAGE_PX (128), JOBS (cores / 2 per recording), POLICY (models/lpe.onnx: the first round's
+# driver), DRIVER (the model of MODELS that drives later rounds: the first lpe one), GEN (200
+# generated buildings per recording), SEED (61), DATA (data/round), PY (python3), TRAIN_WORKERS
+# (cores / models - 1 per run), MODELS ("lpe:small lpe:small-spatial dlm:small-spatial"),
+# INIT_DIR (warm start of the first round: <INIT_DIR>/<kind>-<backbone>/checkpoint_best.pt where
+# it exists), LR (1e-3; later rounds, warm-started, use LR_LATER, 3e-4), GEN_FIRST (1000: round
+# r records on buildings GEN_FIRST + (r-1) GEN.., the expert 2000 higher: never the same twice).
 # The small CPU check runs it with tiny budgets (see training/README.md).
 set -euo pipefail
 
@@ -31,6 +35,9 @@ INIT_DIR=${INIT_DIR:-}
 SEED=${SEED:-61}
 DATA=${DATA:-data/round}
 MODELS=${MODELS:-lpe:small lpe:small-spatial dlm:small-spatial}
+ROUNDS=${ROUNDS:-1}
+LR_LATER=${LR_LATER:-3e-4}
+DRIVER=${DRIVER:-$(tr ' ' '\n' <<<"$MODELS" | grep '^lpe:' | head -n 1 || true)}
 CORES=$(nproc)
 JOBS=${JOBS:-$(( CORES / 2 > 0 ? CORES / 2 : 1 ))}
 n_models=$(wc -w <<<"$MODELS")
@@ -54,49 +61,67 @@ test -f "$POLICY"
     || { cat "$LOGS/record-check.log"; exit 1; }
 rm -rf "$DATA/check"
 
-# 1. Recordings, in parallel, each on half the cores, stopped by the wall budget at an episode
-#    boundary (then exactly the recording of --samples K). Seeds and building ranges differ.
-log "recording for $RECORD_MIN min: DAgger ($POLICY, beta 0.5) and expert, $IMAGE_PX px, $JOBS jobs each"
-"$EVAL" record --policy "$POLICY" --beta 0.5 --generated "$GEN" --generated-first-seed "$GEN_FIRST" \
-    --encounters 1.0 --episode-s 30 --every 2 --noise 0.1 --image-px "$IMAGE_PX" \
-    --seed "$SEED" --jobs "$JOBS" --samples 2000000 --max-minutes "$RECORD_MIN" \
-    --out "$DATA/dagger" > "$LOGS/record-dagger.log" 2>&1 &
-dagger=$!
-"$EVAL" record --generated "$GEN" --generated-first-seed "$((GEN_FIRST + 2000))" \
-    --encounters 0.5 --episode-s 60 --every 2 --noise 0.3 --image-px "$IMAGE_PX" \
-    --seed "$((SEED + 1))" --jobs "$JOBS" --samples 2000000 --max-minutes "$RECORD_MIN" \
-    --out "$DATA/expert" > "$LOGS/record-expert.log" 2>&1 &
-expert=$!
-wait "$dagger" || { tail -20 "$LOGS/record-dagger.log"; exit 1; }
-wait "$expert" || { tail -20 "$LOGS/record-expert.log"; exit 1; }
-tail -n 2 "$LOGS/record-dagger.log" "$LOGS/record-expert.log" | grep -v '^$'
-$PY training/dataset.py "$DATA/dagger" | tail -n 12
-$PY training/dataset.py "$DATA/expert" | tail -n 12
+# One round: recordings, in parallel, each on half the cores, stopped by the wall budget at an
+# episode boundary (then exactly the recording of --samples K), then training on everything so far.
+round() {
+    local r=$1 policy=$2 lr=$3 init_dir=$4
+    local dir="$DATA/r$r" gen_first=$((GEN_FIRST + (r - 1) * GEN)) seed=$((SEED + 10 * (r - 1)))
+    mkdir -p "$dir"
+    log "round $r: recording for $RECORD_MIN min: DAgger ($policy, beta 0.5) and expert, $IMAGE_PX px, $JOBS jobs each"
+    "$EVAL" record --policy "$policy" --beta 0.5 --generated "$GEN" --generated-first-seed "$gen_first" \
+        --encounters 1.0 --episode-s 30 --every 2 --noise 0.1 --image-px "$IMAGE_PX" \
+        --seed "$seed" --jobs "$JOBS" --samples 2000000 --max-minutes "$RECORD_MIN" \
+        --out "$dir/dagger" > "$LOGS/r$r-record-dagger.log" 2>&1 &
+    local dagger=$!
+    "$EVAL" record --generated "$GEN" --generated-first-seed "$((gen_first + 2000))" \
+        --encounters 0.5 --episode-s 60 --every 2 --noise 0.3 --image-px "$IMAGE_PX" \
+        --seed "$((seed + 1))" --jobs "$JOBS" --samples 2000000 --max-minutes "$RECORD_MIN" \
+        --out "$dir/expert" > "$LOGS/r$r-record-expert.log" 2>&1 &
+    local expert=$!
+    wait "$dagger" || { tail -20 "$LOGS/r$r-record-dagger.log"; return 1; }
+    wait "$expert" || { tail -20 "$LOGS/r$r-record-expert.log"; return 1; }
+    tail -n 4 "$LOGS/r$r-record-dagger.log" "$LOGS/r$r-record-expert.log" | grep -v '^$'
+    data+=("$dir/dagger" "$dir/expert")
 
-# 2. Training, all models at once on the one GPU, the cores shared among their data workers.
-log "training $MODELS for $TRAIN_MIN min each, $TRAIN_WORKERS data workers each"
-pids=()
-for m in $MODELS; do
-    kind=${m%%:*}; backbone=${m#*:}
-    speed=(); [ "$kind" = lpe ] && speed=(--balance-speed)
-    init=(); [ -n "$INIT_DIR" ] && [ -f "$INIT_DIR/$kind-$backbone/checkpoint_best.pt" ] \
-        && init=(--init "$INIT_DIR/$kind-$backbone/checkpoint_best.pt")
-    $PY -m training.train --kind "$kind" --backbone "$backbone" --data "$DATA/dagger" "$DATA/expert" \
-        --out "$DATA/train/$kind-$backbone" --minutes "$TRAIN_MIN" --batch 256 --lr "$LR" "${speed[@]}" "${init[@]}" \
-        --workers "$TRAIN_WORKERS" --threads 2 --seed 7 > "$LOGS/train-$kind-$backbone.log" 2>&1 &
-    pids+=($!)
+    log "round $r: training $MODELS for $TRAIN_MIN min each on ${#data[@]} recordings, $TRAIN_WORKERS data workers each"
+    local pids=() m kind backbone speed init
+    for m in $MODELS; do
+        kind=${m%%:*}; backbone=${m#*:}
+        speed=(); [ "$kind" = lpe ] && speed=(--balance-speed)
+        init=(); [ -n "$init_dir" ] && [ -f "$init_dir/$kind-$backbone/checkpoint_best.pt" ] \
+            && init=(--init "$init_dir/$kind-$backbone/checkpoint_best.pt")
+        $PY -m training.train --kind "$kind" --backbone "$backbone" --data "${data[@]}" \
+            --out "$dir/train/$kind-$backbone" --minutes "$TRAIN_MIN" --batch 256 --lr "$lr" "${speed[@]}" "${init[@]}" \
+            --workers "$TRAIN_WORKERS" --threads 2 --seed "$((7 + r))" > "$LOGS/r$r-train-$kind-$backbone.log" 2>&1 &
+        pids+=($!)
+    done
+    local status=0 p
+    for p in "${pids[@]}"; do wait "$p" || status=1; done
+    for m in $MODELS; do
+        kind=${m%%:*}; backbone=${m#*:}
+        grep -E '^epoch|Error|error' "$LOGS/r$r-train-$kind-$backbone.log" | head -n 40 || true
+        [ -f "$dir/train/$kind-$backbone/summary.json" ] \
+            && cp "$dir/train/$kind-$backbone/summary.json" "$LOGS/r$r-summary-$kind-$backbone.json"
+    done
+    return "$status"
+}
+
+data=()
+policy=$POLICY; lr=$LR; init_dir=$INIT_DIR; status=0
+for r in $(seq 1 "$ROUNDS"); do
+    round "$r" "$policy" "$lr" "$init_dir" || { status=1; break; }
+    policy="$DATA/r$r/train/${DRIVER%%:*}-${DRIVER#*:}/${DRIVER%%:*}.onnx"
+    lr=$LR_LATER; init_dir="$DATA/r$r/train"
+    last=$r
 done
-status=0
-for p in "${pids[@]}"; do wait "$p" || status=1; done
 
-# 3. One tar per model (checkpoint, ONNX, card, curves, summary) and the logs.
+# The last complete round's models: one tar per model (checkpoint, ONNX, card, curves, summary).
 for m in $MODELS; do
-    kind=${m%%:*}; backbone=${m#*:}; dir="$DATA/train/$kind-$backbone"
-    grep -E '^epoch|^summary|Error|error' "$LOGS/train-$kind-$backbone.log" | head -n 40 || true
+    kind=${m%%:*}; backbone=${m#*:}; dir="$DATA/r${last:-1}/train/$kind-$backbone"
     [ -d "$dir" ] && tar -C "$dir" -cf "$ROUND_OUT/$kind-$backbone.tar" \
         $(cd "$dir" && ls checkpoint_best.pt ./*.onnx card.json history.json summary.json loss.png 2>/dev/null)
 done
 tar -C "$LOGS" -cf "$ROUND_OUT/logs.tar" .
 ls -la "$ROUND_OUT"
-log "done (status $status)"
+log "done after ${last:-0} of $ROUNDS rounds (status $status)"
 exit "$status"
