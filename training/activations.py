@@ -43,7 +43,6 @@ import onnx
 import onnxruntime as ort
 from PIL import Image
 
-from training import card as card_mod
 from training.check_frames import normalize, sized
 
 TOLERANCE = 1e-4
@@ -184,17 +183,6 @@ def to_card_size(frames: list[dict], kind: str, meta: dict[str, str]) -> list[di
                  lpe=sized(f["lpe"], meta, "lpe") if kind == "lpe" else f["lpe"]) for f in frames]
 
 
-def check_sizes(frames: list[dict], kind: str, meta: dict[str, str]) -> None:
-    h, w = int(meta["image_height_px"]), int(meta["image_width_px"])
-    cam = frames[0]["camera"].shape[:2]
-    if cam != (h, w):
-        raise SystemExit(f"activations: the camera frames are {cam[1]}x{cam[0]} px, the card says {w}x{h}")
-    if kind == "lpe":
-        p = card_mod.lpe_input_px(meta)
-        if frames[0]["lpe"].shape[:2] != (p, p):
-            raise SystemExit(f"activations: the LPE frames are {frames[0]['lpe'].shape[1]} px, the card says {p}")
-
-
 # ---------------------------------------------------------------------------------- the maps
 
 def reduce_map(act: np.ndarray, topk: int | None) -> np.ndarray:
@@ -264,7 +252,6 @@ def render(model_path: str | Path, frames_dir: str | Path, out: str | Path, rows
     sess = session_with_outputs(proto, [layer["tensor"] for layer in chosen])
 
     frames = to_card_size(load_frames(Path(frames_dir)), kind, meta)
-    check_sizes(frames, kind, meta)
     names = ["control"] + [layer["tensor"] for layer in chosen]
     results, worst = {}, 0.0
     for f in frames:
