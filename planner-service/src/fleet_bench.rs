@@ -576,6 +576,9 @@ struct SimRobot {
     id: RobotId,
     pose: Pose2D,
     seq: u64,
+    /// Declared like the agent's (robot-agent `node.rs`): the key is declared once, so the
+    /// routers on the way cache its route instead of matching every pose's key again.
+    publisher: zenoh::pubsub::Publisher<'static>,
 }
 
 #[derive(Default)]
@@ -610,16 +613,19 @@ pub async fn run_robots(
         .map_err(setup)?;
     let site = &opts.plan.site;
     let map_ref = &opts.plan.map;
-    let mut robots: Vec<SimRobot> = opts
-        .plan
-        .robots
-        .iter()
-        .map(|r| SimRobot {
+    let mut robots: Vec<SimRobot> = Vec::with_capacity(opts.plan.robots.len());
+    for r in &opts.plan.robots {
+        let publisher = session
+            .declare_publisher(keys::robot(site, &r.id, RobotTopic::Pose))
+            .await
+            .map_err(setup)?;
+        robots.push(SimRobot {
             id: r.id.clone(),
             pose: r.start,
             seq: 0,
-        })
-        .collect();
+            publisher,
+        });
+    }
     let n = robots.len();
     let received = Arc::new(Mutex::new(Received::default()));
     let mut subs = Vec::new();
@@ -664,7 +670,7 @@ pub async fn run_robots(
         }
         for (i, r) in robots.iter_mut().enumerate() {
             if !answered[i] {
-                publish_pose(&session, site, r, map_ref, i, &received).await?;
+                publish_pose(r, map_ref, i, &received).await?;
             }
         }
         tokio::time::sleep(Duration::from_millis(100)).await;
@@ -718,7 +724,7 @@ pub async fn run_robots(
                     r.pose = p;
                 }
             }
-            publish_pose(&session, site, r, map_ref, i, &received).await?;
+            publish_pose(r, map_ref, i, &received).await?;
             poses_sent += 1;
         }
         let next = next_due.iter().min().copied().unwrap_or(now + period);
@@ -744,8 +750,6 @@ pub async fn run_robots(
 }
 
 async fn publish_pose(
-    session: &zenoh::Session,
-    site: &SiteId,
     r: &mut SimRobot,
     map: &MapRef,
     index: usize,
@@ -760,13 +764,9 @@ async fn publish_pose(
         map: map.clone(),
     };
     lock(received).sent.insert((index, r.seq), Instant::now());
-    protocol::zenoh_io::put(
-        session,
-        &keys::robot(site, &r.id, RobotTopic::Pose).into(),
-        &msg,
-    )
-    .await
-    .map_err(setup)
+    protocol::zenoh_io::publish(&r.publisher, &msg)
+        .await
+        .map_err(setup)
 }
 
 /// The pose exactly `step_m` along `path` (interpolated: intentions carry a thinned path).

@@ -37,3 +37,16 @@ pub struct PathStats {
 pub fn length_of(poses: &[Pose2D]) -> f64 {
     poses.windows(2).map(|w| w[0].distance_m(&w[1])).sum()
 }
+
+/// Index of the pose of `path` nearest to `robot` (the first of equals); `None` when empty.
+#[must_use]
+pub fn nearest_index(path: &[Pose2D], robot: Pose2D) -> Option<usize> {
+    let mut best: Option<(usize, f64)> = None;
+    for (i, p) in path.iter().enumerate() {
+        let d = robot.distance_sq_m2(p);
+        if best.is_none_or(|(_, b)| d < b) {
+            best = Some((i, d));
+        }
+    }
+    best.map(|(i, _)| i)
+}

@@ -269,7 +269,7 @@ fn a_kept_path_rejoins_ahead_of_the_robot() {
             ..planning::ReuseParams::default()
         };
         let mut kept = planning::intention::KeptPlan::new(map.key(), end, false, poses.clone());
-        let rest = kept.follow(&map, robot, end, false, &params).unwrap();
+        let rest = kept.follow(&map, robot, end, false, &params).unwrap().poses;
         assert_eq!(rest[0], robot);
         let ahead = along_from_near(&rest[1]);
         assert!(

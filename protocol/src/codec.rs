@@ -20,7 +20,9 @@
 
 use serde::de::DeserializeOwned;
 use serde::Serialize;
-use serde_json::Value;
+use std::collections::BTreeMap;
+
+use serde_json::value::RawValue;
 
 use crate::messages::{
     AgentStatus, CameraFrame, CmdVel, Intention, LaserScan, MapGrid, MapMeta, Odometry,
@@ -211,16 +213,15 @@ pub fn peek_kind(bytes: &[u8]) -> Result<(u16, String), DecodeError> {
     } else {
         bytes
     };
-    let value: Value = serde_json::from_slice(header)?;
-    let fields = envelope_fields(&value)?;
-    let version = read_version(fields)?;
-    let kind = read_kind(fields)?;
-    Ok((version, kind.to_string()))
+    let fields = envelope_fields(header)?;
+    let version = read_version(&fields)?;
+    let kind = read_kind(&fields)?;
+    Ok((version, kind))
 }
 
 fn decode_json<M: WireMessage>(bytes: &[u8]) -> Result<M, DecodeError> {
-    let value: Value = serde_json::from_slice(bytes)?;
-    let (msg, blob_len) = open_envelope::<M>(value)?;
+    let fields = envelope_fields(bytes)?;
+    let (msg, blob_len) = open_envelope::<M>(&fields)?;
     if M::FRAMED {
         return Err(DecodeError::Invalid {
             field: "framing",
@@ -236,7 +237,7 @@ fn decode_json<M: WireMessage>(bytes: &[u8]) -> Result<M, DecodeError> {
             reason: "a JSON envelope carries no blob".to_string(),
         });
     }
-    let msg: M = serde_json::from_value(msg)?;
+    let msg: M = serde_json::from_str(msg.get())?;
     msg.validate()?;
     Ok(msg)
 }
@@ -273,8 +274,8 @@ fn split_frame(bytes: &[u8]) -> Result<(u16, &[u8], &[u8]), DecodeError> {
 
 fn decode_framed<M: WireMessage>(bytes: &[u8]) -> Result<M, DecodeError> {
     let (_, header, blob) = split_frame(bytes)?;
-    let value: Value = serde_json::from_slice(header)?;
-    let (msg, blob_len) = open_envelope::<M>(value)?;
+    let fields = envelope_fields(header)?;
+    let (msg, blob_len) = open_envelope::<M>(&fields)?;
     if !M::FRAMED {
         return Err(DecodeError::Invalid {
             field: "framing",
@@ -307,29 +308,38 @@ fn decode_framed<M: WireMessage>(bytes: &[u8]) -> Result<M, DecodeError> {
             ),
         });
     }
-    let mut msg: M = serde_json::from_value(msg)?;
+    let mut msg: M = serde_json::from_str(msg.get())?;
     msg.put_blob(blob.to_vec())?;
     msg.validate()?;
     Ok(msg)
 }
 
-type EnvelopeFields = serde_json::Map<String, Value>;
+/// The envelope's fields, each still its raw JSON text: the version and kind are checked before
+/// the message is interpreted, and the message is then parsed once, straight into its type.
+type EnvelopeFields<'a> = BTreeMap<String, &'a RawValue>;
 
-fn envelope_fields(value: &Value) -> Result<&EnvelopeFields, DecodeError> {
-    value.as_object().ok_or_else(|| DecodeError::Invalid {
-        field: "envelope",
-        reason: "not a JSON object".to_string(),
-    })
+fn envelope_fields(bytes: &[u8]) -> Result<EnvelopeFields<'_>, DecodeError> {
+    if bytes.iter().find(|b| !b.is_ascii_whitespace()) != Some(&b'{') {
+        return Err(DecodeError::Invalid {
+            field: "envelope",
+            reason: "not a JSON object".to_string(),
+        });
+    }
+    Ok(serde_json::from_slice(bytes)?)
 }
 
-fn read_version(fields: &EnvelopeFields) -> Result<u16, DecodeError> {
-    let raw = fields
-        .get("wire_version")
-        .and_then(Value::as_u64)
-        .ok_or_else(|| DecodeError::Invalid {
-            field: "wire_version",
-            reason: "missing or not an unsigned integer".to_string(),
-        })?;
+/// A field's JSON as `T`, `None` when it is not a `T`.
+fn field_as<'a, T: serde::Deserialize<'a>>(fields: &EnvelopeFields<'a>, name: &str) -> Option<T> {
+    fields
+        .get(name)
+        .and_then(|raw| serde_json::from_str(raw.get()).ok())
+}
+
+fn read_version(fields: &EnvelopeFields<'_>) -> Result<u16, DecodeError> {
+    let raw: u64 = field_as(fields, "wire_version").ok_or_else(|| DecodeError::Invalid {
+        field: "wire_version",
+        reason: "missing or not an unsigned integer".to_string(),
+    })?;
     let got = u16::try_from(raw).map_err(|_| DecodeError::Invalid {
         field: "wire_version",
         reason: format!("{raw} is out of range (this build speaks {WIRE_VERSION})"),
@@ -343,31 +353,24 @@ fn read_version(fields: &EnvelopeFields) -> Result<u16, DecodeError> {
     Ok(got)
 }
 
-fn read_kind(fields: &EnvelopeFields) -> Result<&str, DecodeError> {
-    fields
-        .get("kind")
-        .and_then(Value::as_str)
-        .ok_or_else(|| DecodeError::Invalid {
-            field: "kind",
-            reason: "missing or not a string".to_string(),
-        })
+fn read_kind(fields: &EnvelopeFields<'_>) -> Result<String, DecodeError> {
+    field_as(fields, "kind").ok_or_else(|| DecodeError::Invalid {
+        field: "kind",
+        reason: "missing or not a string".to_string(),
+    })
 }
 
-/// Checks version, kind and envelope shape; returns the `msg` value and `blob_len`.
-fn open_envelope<M: WireMessage>(value: Value) -> Result<(Value, Option<u64>), DecodeError> {
-    let Value::Object(mut fields) = value else {
-        return Err(DecodeError::Invalid {
-            field: "envelope",
-            reason: "not a JSON object".to_string(),
-        });
-    };
+/// Checks version, kind and envelope shape; returns the raw `msg` and `blob_len`.
+fn open_envelope<'a, M: WireMessage>(
+    fields: &EnvelopeFields<'a>,
+) -> Result<(&'a RawValue, Option<u64>), DecodeError> {
     // Version before kind: a newer version may have renamed kinds.
-    read_version(&fields)?;
-    let kind = read_kind(&fields)?;
+    read_version(fields)?;
+    let kind = read_kind(fields)?;
     if kind != M::KIND {
         return Err(DecodeError::WrongKind {
             expected: M::KIND,
-            got: kind.to_string(),
+            got: kind,
         });
     }
     if let Some(unknown) = fields
@@ -381,15 +384,20 @@ fn open_envelope<M: WireMessage>(value: Value) -> Result<(Value, Option<u64>), D
     }
     let blob_len = match fields.get("blob_len") {
         None => None,
-        Some(v) => Some(v.as_u64().ok_or_else(|| DecodeError::Invalid {
-            field: "blob_len",
-            reason: "not an unsigned integer".to_string(),
-        })?),
+        Some(raw) => Some(
+            serde_json::from_str(raw.get()).map_err(|_| DecodeError::Invalid {
+                field: "blob_len",
+                reason: "not an unsigned integer".to_string(),
+            })?,
+        ),
     };
-    let msg = fields.remove("msg").ok_or_else(|| DecodeError::Invalid {
-        field: "msg",
-        reason: "missing".to_string(),
-    })?;
+    let msg = fields
+        .get("msg")
+        .copied()
+        .ok_or_else(|| DecodeError::Invalid {
+            field: "msg",
+            reason: "missing".to_string(),
+        })?;
     Ok((msg, blob_len))
 }
 

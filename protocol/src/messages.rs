@@ -96,6 +96,13 @@ impl Pose2D {
         (self.x_m - other.x_m).hypot(self.y_m - other.y_m)
     }
 
+    /// Squared distance between the positions: for finding the nearest pose of a path, which
+    /// every replanning cycle does, without a square root per pose.
+    pub fn distance_sq_m2(&self, other: &Pose2D) -> f64 {
+        let (dx, dy) = (self.x_m - other.x_m, self.y_m - other.y_m);
+        dx * dx + dy * dy
+    }
+
     pub fn validate(&self, field: &'static str) -> Result<(), ValidationError> {
         for v in [self.x_m, self.y_m, self.yaw_rad] {
             check_finite(field, v)?;

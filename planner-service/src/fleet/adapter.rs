@@ -313,7 +313,7 @@ impl Fleet {
         received: Instant,
     ) -> Option<IntentionView> {
         let key = keys::robot(&self.site, robot, RobotTopic::Intention);
-        if let Err(e) = put_sync(&self.session, &key, intention) {
+        if let Err(e) = self.publishers.put(&key, intention) {
             tracing::warn!(robot = %robot, "cannot publish intention: {e}");
             return None;
         }
@@ -394,24 +394,11 @@ pub(super) async fn watchdog(fleet: Weak<Fleet>, mut shutdown: watch::Receiver<b
     }
 }
 
-fn encode<M: WireMessage>(msg: &M) -> Result<Vec<u8>, FleetError> {
+pub(super) fn encode<M: WireMessage>(msg: &M) -> Result<Vec<u8>, FleetError> {
     protocol::encode(msg).map_err(|e| FleetError::Zenoh {
         action: "encode",
         reason: e.to_string(),
     })
-}
-
-/// Encodes and puts a message from synchronous code (the blocking pool).
-pub(super) fn put_sync<M: WireMessage>(
-    session: &Session,
-    key: &zenoh::key_expr::OwnedKeyExpr,
-    msg: &M,
-) -> Result<(), FleetError> {
-    session
-        .put(key, encode(msg)?)
-        .encoding(protocol::zenoh_io::encoding_for::<M>())
-        .wait()
-        .map_err(zenoh_err("put"))
 }
 
 async fn put<M: WireMessage>(

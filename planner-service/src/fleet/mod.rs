@@ -34,6 +34,7 @@ pub mod store;
 pub mod types;
 
 mod adapter;
+mod publishers;
 mod worker;
 
 use std::collections::{BTreeSet, HashMap};
@@ -48,6 +49,7 @@ use protocol::{
     Header, Image, ImageEncoding, Intention, MapName, Pose2D, PoseEstimate, RobotId, SiteId,
     TaskEvent, TaskId, WorkerId,
 };
+use publishers::Publishers;
 use tokio::sync::{broadcast, mpsc, watch};
 use zenoh::pubsub::Subscriber;
 use zenoh::query::Queryable;
@@ -135,6 +137,8 @@ pub struct Fleet {
     me: Weak<Fleet>,
     site: SiteId,
     session: Session,
+    /// The robots' intention publishers.
+    publishers: Publishers,
     config: ServiceConfig,
     runtime: tokio::runtime::Handle,
     store: Arc<TaskStore>,
@@ -190,6 +194,7 @@ impl Fleet {
         let fleet = Arc::new_cyclic(|me| Fleet {
             me: me.clone(),
             site,
+            publishers: Publishers::new(session.clone()),
             session,
             planning: PlanningMaps::new(
                 MapSource::Store(Arc::clone(&maps)),

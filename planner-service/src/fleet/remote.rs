@@ -34,9 +34,9 @@ use zenoh::pubsub::Subscriber;
 use zenoh::sample::{Sample, SampleKind};
 use zenoh::{Session, Wait};
 
-use super::adapter::put_sync;
 use super::core::Cycle;
 use super::error::{zenoh_err, FleetError};
+use super::publishers::Publishers;
 use super::types::IntentionView;
 use super::worker::{Arrival, CycleHost, MapSource, Outcome, PlanningMaps, Worker};
 use super::{lock, now_ns, rendezvous};
@@ -219,6 +219,8 @@ pub struct WorkerNode {
     me: Weak<WorkerNode>,
     options: WorkerOptions,
     session: Session,
+    /// The intention and cycle-outcome publishers of the robots this process plans.
+    publishers: Publishers,
     runtime: tokio::runtime::Handle,
     planning: PlanningMaps,
     /// The live workers, this one included.
@@ -252,6 +254,7 @@ impl WorkerNode {
         let site = options.site.clone();
         let node = Arc::new_cyclic(|me| WorkerNode {
             me: me.clone(),
+            publishers: Publishers::new(session.clone()),
             planning: PlanningMaps::new(
                 MapSource::Zenoh {
                     session: session.clone(),
@@ -413,7 +416,7 @@ impl WorkerNode {
 
     /// Publishes `msg` on `key`; whether it went out (a failure is logged here).
     fn put<M: WireMessage>(&self, key: &zenoh::key_expr::OwnedKeyExpr, msg: &M) -> bool {
-        match put_sync(&self.session, key, msg) {
+        match self.publishers.put(key, msg) {
             Ok(()) => true,
             Err(e) => {
                 tracing::warn!(key = %key, "cannot publish: {e}");

@@ -78,11 +78,7 @@ impl DlmParams {
 /// remaining path length from the closest path point. `None` for an empty path.
 #[must_use]
 pub fn curvature_ahead(path: &[Pose2D], robot: Pose2D, window_m: f64) -> Option<(f64, f64)> {
-    let closest = path
-        .iter()
-        .enumerate()
-        .min_by(|a, b| a.1.distance_m(&robot).total_cmp(&b.1.distance_m(&robot)))
-        .map(|(i, _)| i)?;
+    let closest = crate::path::nearest_index(path, robot)?;
     let rest = &path[closest..];
     let remaining_m: f64 = rest.windows(2).map(|w| w[0].distance_m(&w[1])).sum();
     let mut acc = 0.0;

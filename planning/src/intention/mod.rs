@@ -13,4 +13,4 @@ pub mod reuse;
 pub use dlm::{dlm_from_path, DlmParams};
 pub use lpe::{render_lpe, LpeImage, LpeParams};
 pub use pipeline::{stop_intention, thin_path, Answer, IntentionConfig, IntentionPlanner, Planned};
-pub use reuse::{KeptPlan, ReuseParams};
+pub use reuse::{KeptPlan, KeptRest, ReuseParams};

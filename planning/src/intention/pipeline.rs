@@ -20,7 +20,7 @@ use crate::intention::dlm::{dlm_from_path, DlmParams};
 use crate::intention::lpe::{render_lpe, LpeImage, LpeParams};
 use crate::intention::reuse::{KeptPlan, ReuseParams};
 use crate::map::PlanningMap;
-use crate::path::{length_of, Path};
+use crate::path::Path;
 
 /// Everything the pipeline needs besides the map; the service fills it from its `[planner]`,
 /// `[dlm]`, `[lpe]` and `[fleet]` tables.
@@ -273,10 +273,7 @@ impl IntentionPlanner {
         });
         let reused = kept_rest.is_some();
         let (poses, length_m) = match kept_rest {
-            Some(rest) => {
-                let length_m = length_of(&rest);
-                (rest, length_m)
-            }
+            Some(rest) => (rest.poses, rest.length_m),
             None => {
                 let path = self.search(robot, goal, free_heading)?;
                 self.kept = self.config.reuse.enabled.then(|| {
@@ -384,12 +381,14 @@ pub fn thin_path(path: &[Pose2D], spacing_m: f64) -> Vec<Pose2D> {
     if spacing_m <= 0.0 || path.len() <= 2 {
         return path.to_vec();
     }
+    // The tolerance keeps a pose exactly one spacing away despite rounding.
+    let min_m = (spacing_m - 1e-9).max(0.0);
+    let min_sq_m2 = min_m * min_m;
     let mut out = vec![*first];
     let mut kept = *first;
     for p in &path[1..path.len() - 1] {
         let turned = protocol::normalize_angle(p.yaw_rad - kept.yaw_rad).abs();
-        // The tolerance keeps a pose exactly one spacing away despite rounding.
-        if p.distance_m(&kept) >= spacing_m - 1e-9 || turned >= TURN_RAD {
+        if p.distance_sq_m2(&kept) >= min_sq_m2 || turned >= TURN_RAD {
             out.push(*p);
             kept = *p;
         }

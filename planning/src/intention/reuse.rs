@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Endpoint, PlanError};
 use crate::map::{MapKey, PlanningMap};
+use crate::path::nearest_index;
 use protocol::Pose2D;
 
 /// When a kept plan may answer instead of a new search.
@@ -84,6 +85,14 @@ impl ReuseParams {
     }
 }
 
+/// What a kept plan answers: the rest of its path from the robot, and the rest's length.
+#[derive(Debug, Clone, PartialEq)]
+pub struct KeptRest {
+    /// The robot's pose, then the kept path from where it rejoins it.
+    pub poses: Vec<Pose2D>,
+    pub length_m: f64,
+}
+
 /// The last searched path of one robot, and how far along it the robot has come.
 #[derive(Debug, Clone)]
 pub struct KeptPlan {
@@ -91,6 +100,9 @@ pub struct KeptPlan {
     goal: Pose2D,
     free_heading: bool,
     poses: Vec<Pose2D>,
+    /// Path length from the first pose to each pose, so an answer's length costs no walk
+    /// along the path.
+    along_m: Vec<f64>,
     /// Index of the path pose nearest the robot at the last answer (the search for the nearest
     /// pose starts here, so a path that passes near itself is never followed backwards).
     along: usize,
@@ -101,11 +113,20 @@ impl KeptPlan {
     /// Keeps `poses`, just searched on `map` to `goal`.
     #[must_use]
     pub fn new(map: MapKey, goal: Pose2D, free_heading: bool, poses: Vec<Pose2D>) -> Self {
+        let mut along_m = Vec::with_capacity(poses.len());
+        let mut acc = 0.0;
+        for (i, p) in poses.iter().enumerate() {
+            if i > 0 {
+                acc += poses[i - 1].distance_m(p);
+            }
+            along_m.push(acc);
+        }
         Self {
             map,
             goal,
             free_heading,
             poses,
+            along_m,
             along: 0,
             reused: 0,
         }
@@ -120,7 +141,7 @@ impl KeptPlan {
         goal: Pose2D,
         free_heading: bool,
         params: &ReuseParams,
-    ) -> Option<Vec<Pose2D>> {
+    ) -> Option<KeptRest> {
         // A free-heading goal's heading is resolved from the robot's pose each cycle, so only
         // its position identifies it.
         let same_goal = free_heading == self.free_heading
@@ -134,13 +155,8 @@ impl KeptPlan {
         {
             return None;
         }
-        let (offset, nearest) = self
-            .poses
-            .get(self.along..)?
-            .iter()
-            .enumerate()
-            .min_by(|(_, a), (_, b)| robot.distance_m(a).total_cmp(&robot.distance_m(b)))?;
-        let index = self.along + offset;
+        let index = self.along + nearest_index(self.poses.get(self.along..)?, robot)?;
+        let nearest = &self.poses[index];
         let turned = protocol::normalize_angle(robot.yaw_rad - nearest.yaw_rad).abs();
         if robot.distance_m(nearest) > params.corridor_m
             || turned > params.corridor_yaw_rad
@@ -152,14 +168,18 @@ impl KeptPlan {
         self.along = index;
         self.reused += 1;
         let mut rejoin = index + 1;
-        let mut ahead_m = self.poses[index].distance_m(&self.poses[rejoin]);
-        while ahead_m < params.rejoin_m && rejoin + 1 < self.poses.len() {
-            ahead_m += self.poses[rejoin].distance_m(&self.poses[rejoin + 1]);
+        while self.along_m[rejoin] - self.along_m[index] < params.rejoin_m
+            && rejoin + 1 < self.poses.len()
+        {
             rejoin += 1;
         }
-        let mut rest = Vec::with_capacity(self.poses.len() - rejoin + 1);
-        rest.push(robot);
-        rest.extend_from_slice(&self.poses[rejoin..]);
-        Some(rest)
+        let mut poses = Vec::with_capacity(self.poses.len() - rejoin + 1);
+        poses.push(robot);
+        poses.extend_from_slice(&self.poses[rejoin..]);
+        let end_m = self.along_m[self.along_m.len() - 1];
+        Some(KeptRest {
+            poses,
+            length_m: robot.distance_m(&self.poses[rejoin]) + end_m - self.along_m[rejoin],
+        })
     }
 }
