@@ -551,6 +551,10 @@ impl Fleet {
             self.me.clone(),
             id.clone(),
             self.shutdown.subscribe(),
+            (
+                self.session.clone(),
+                protocol::keys::robot(&self.site, id, protocol::keys::RobotTopic::Pose),
+            ),
         );
         state.workers.insert(id.clone(), worker);
     }

@@ -404,11 +404,13 @@ impl WorkerNode {
         robots
             .entry(robot.clone())
             .or_insert_with(|| {
+                let pose_key = keys::robot(&self.options.site, &robot, RobotTopic::Pose);
                 Worker::spawn(
                     &self.runtime,
                     self.me.clone(),
                     robot,
                     self.shutdown.subscribe(),
+                    (self.session.clone(), pose_key),
                 )
             })
             .send(arrival);

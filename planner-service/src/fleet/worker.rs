@@ -24,6 +24,7 @@ use planning::{
 };
 use protocol::{Header, Intention, MapName, PoseEstimate, RobotId, SiteId, TaskId};
 use tokio::sync::{watch, Semaphore};
+use zenoh::key_expr::OwnedKeyExpr;
 use zenoh::Session;
 
 use super::book::Decision;
@@ -109,14 +110,34 @@ pub(crate) struct Worker {
 impl Worker {
     /// Starts the worker of robot `id` on `runtime`; it ends with `shutdown`, when the host
     /// is gone, or when dropped.
+    ///
+    /// `pose_key` is the robot's pose key on `session`: the worker declares it while it runs,
+    /// so Zenoh keeps a resource for that key and caches the route of the robot's poses. An
+    /// undeclared key is matched again against every subscription the session knows, for
+    /// every pose: O(robots) per pose, O(robots²) per cycle of the fleet.
     pub fn spawn<H: CycleHost>(
         runtime: &tokio::runtime::Handle,
         host: Weak<H>,
         id: RobotId,
         shutdown: watch::Receiver<bool>,
+        (session, pose_key): (Session, OwnedKeyExpr),
     ) -> Self {
         let (poses, rx) = watch::channel(None);
-        let task = runtime.spawn(run(host, id, rx, shutdown));
+        let task = runtime.spawn(async move {
+            let declared = match session.declare_keyexpr(pose_key).await {
+                Ok(k) => Some(k),
+                Err(e) => {
+                    tracing::debug!(robot = %id, "pose key not declared: {e}");
+                    None
+                }
+            };
+            run(host, id, rx, shutdown).await;
+            if let Some(k) = declared {
+                if let Err(e) = session.undeclare(k).await {
+                    tracing::debug!("pose key not undeclared: {e}");
+                }
+            }
+        });
         Self { poses, task }
     }
 
