@@ -11,6 +11,8 @@
 //! - `adapter`: the thin Zenoh side — decodes samples, calls the core, publishes its effects.
 //! - `worker`: one replanning worker per robot, calling the planning crate; the cycle it runs
 //!   is the same in the service and in worker processes.
+//! - `publishers`: declared publishers for what goes out every cycle (intentions, a worker's
+//!   cycle outcomes), so Zenoh routes them from a cache instead of matching each key again.
 //! - [`remote`]: worker processes (`planner-service worker`) that take the replanning off the
 //!   service, each planning the robots [`rendezvous`] hashing gives it.
 //! - [`config`], [`error`], [`types`], [`metrics`], [`store`]: the `[fleet]` table, errors,
