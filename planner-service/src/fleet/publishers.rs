@@ -57,10 +57,7 @@ impl Publishers {
                 Arc::clone(lock(&self.declared).entry(key.clone()).or_insert(p))
             }
         };
-        publisher
-            .put(bytes)
-            .encoding(protocol::zenoh_io::encoding_for::<M>())
-            .wait()
-            .map_err(zenoh_err("put"))
+        // The publisher carries the kind's encoding (a key always carries one kind).
+        publisher.put(bytes).wait().map_err(zenoh_err("put"))
     }
 }
