@@ -18,10 +18,10 @@
 //! change everything after it; a receiver gets [`DecodeError::UnsupportedVersion`] with both
 //! versions named. Messages are validated on encode and on decode.
 
-use serde::de::DeserializeOwned;
-use serde::Serialize;
 use std::collections::BTreeMap;
 
+use serde::de::DeserializeOwned;
+use serde::Serialize;
 use serde_json::value::RawValue;
 
 use crate::messages::{
