@@ -69,6 +69,8 @@ pub struct ModeFigures {
     pub path_reuse: bool,
     pub duration_s: f64,
     pub poses_sent: u64,
+    /// Of those, the poses the robots' process sent more than half a period late.
+    pub poses_late: u64,
     pub intentions_received: u64,
     /// Share of poses that got their own answer (the rest were superseded by a newer pose
     /// while the robot's worker was busy, by design).
@@ -82,6 +84,9 @@ pub struct ModeFigures {
     /// Replans of robots with a task, and of those the answers from a kept plan (no search).
     pub replans: u64,
     pub kept_plan_answers: u64,
+    /// Poses of the whole run (warm-up included) that the service's workers never took: a
+    /// newer pose of the same robot replaced each while its worker was still planning.
+    pub poses_superseded: u64,
     pub tasks_created: u64,
     pub tasks_completed: u64,
     /// Who replanned: the service and each worker process, with their replans and latency.
@@ -170,6 +175,10 @@ pub struct RobotsOptions {
 pub struct RobotsResult {
     pub duration_s: f64,
     pub poses_sent: u64,
+    /// Poses sent more than half a period after they were due: the robots' process fell
+    /// behind (a real robot's poses come evenly; these come bunched, and the older of two
+    /// bunched poses is often superseded before the service takes it).
+    pub poses_late: u64,
     pub answered: u64,
     pub latency_ms: Summary,
 }
@@ -387,6 +396,7 @@ async fn run_mode(
                 path_reuse: reuse,
                 duration_s: robots.duration_s,
                 poses_sent: robots.poses_sent,
+                poses_late: robots.poses_late,
                 intentions_received: robots.answered,
                 answered_fraction: if robots.poses_sent == 0 {
                     0.0
@@ -399,6 +409,7 @@ async fn run_mode(
                 latency_ms: robots.latency_ms,
                 replans: metrics.replans_total(),
                 kept_plan_answers: metrics.replans_reused_total(),
+                poses_superseded: metrics.poses_superseded_total(),
                 tasks_created,
                 tasks_completed: completed as u64,
                 workers: fleet.workers(),
@@ -691,6 +702,7 @@ pub async fn run_robots(
     let mut warming = !warmup.is_zero();
     let run_for = warmup + Duration::from_secs_f64(opts.duration_s);
     let mut poses_sent = 0u64;
+    let mut poses_late = 0u64;
     let slot = period / u32::try_from(n).unwrap_or(u32::MAX);
     let mut next_due: Vec<Instant> = (0..n)
         .map(|i| t0 + slot * u32::try_from(i).unwrap_or(0))
@@ -702,6 +714,7 @@ pub async fn run_robots(
             warming = false;
             t0 = now;
             poses_sent = 0;
+            poses_late = 0;
             let mut g = lock(&received);
             g.latencies_ms.clear();
             g.count = 0;
@@ -710,6 +723,9 @@ pub async fn run_robots(
         for (i, r) in robots.iter_mut().enumerate() {
             if now < next_due[i] {
                 continue;
+            }
+            if now.duration_since(next_due[i]) > period / 2 {
+                poses_late += 1;
             }
             next_due[i] += period;
             let (path, idle) = {
@@ -744,6 +760,7 @@ pub async fn run_robots(
     Ok(RobotsResult {
         duration_s,
         poses_sent,
+        poses_late,
         answered,
         latency_ms: Summary::of(&latencies),
     })
@@ -820,8 +837,8 @@ fn reference_replans(
 #[must_use]
 pub fn markdown(r: &FleetBenchReport) -> String {
     let mut out = String::from(
-        "| robots | rate | workers | replanning | poses sent | answered | replans/s | kept-plan answers | latency mean | p50 | p99 | max | tasks done |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| robots | rate | workers | replanning | poses sent | sent late | answered | superseded | replans/s | kept-plan answers | latency mean | p50 | p99 | max | tasks done |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for m in std::iter::once(&r.measured).chain(r.full_replanning.as_ref()) {
         #[allow(clippy::cast_precision_loss)]
@@ -831,7 +848,7 @@ pub fn markdown(r: &FleetBenchReport) -> String {
             100.0 * m.kept_plan_answers as f64 / m.replans as f64
         };
         out.push_str(&format!(
-            "| {} | {:.0} Hz | {} | {} | {} | {:.1} % | {:.0} | {kept:.1} % | {:.2} ms | {:.2} ms | {:.2} ms | {:.2} ms | {} |\n",
+            "| {} | {:.0} Hz | {} | {} | {} | {} | {:.1} % | {} | {:.0} | {kept:.1} % | {:.2} ms | {:.2} ms | {:.2} ms | {:.2} ms | {} |\n",
             r.robots,
             r.rate_hz,
             match (r.workers, r.pin_workers) {
@@ -841,7 +858,9 @@ pub fn markdown(r: &FleetBenchReport) -> String {
             },
             if m.path_reuse { "path reuse" } else { "full" },
             m.poses_sent,
+            m.poses_late,
             m.answered_fraction * 100.0,
+            m.poses_superseded,
             m.replans_per_s,
             m.latency_ms.mean,
             m.latency_ms.p50,

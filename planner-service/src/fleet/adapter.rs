@@ -171,7 +171,9 @@ impl Fleet {
             // While worker processes are alive they plan every robot.
             if state.remote.is_empty() {
                 if let Some(w) = state.workers.get(&id) {
-                    w.send(Arrival { pose, received });
+                    if w.send(Arrival { pose, received }) {
+                        self.metrics.record_superseded();
+                    }
                 }
             }
             ((), effects)

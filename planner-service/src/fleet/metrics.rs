@@ -125,6 +125,7 @@ pub struct FleetMetrics {
     replans_total: AtomicU64,
     replan_failures_total: AtomicU64,
     replans_reused_total: AtomicU64,
+    poses_superseded_total: AtomicU64,
     intentions_total: AtomicU64,
     latency: LatencyHistogram,
     robots_online: AtomicI64,
@@ -149,6 +150,17 @@ impl FleetMetrics {
     #[must_use]
     pub fn replans_reused_total(&self) -> u64 {
         self.replans_reused_total.load(Ordering::Relaxed)
+    }
+
+    /// A pose was replaced by a newer one before its robot's worker took it: it is never
+    /// answered, because the worker was still planning an older pose.
+    pub fn record_superseded(&self) {
+        self.poses_superseded_total.fetch_add(1, Ordering::Relaxed);
+    }
+
+    #[must_use]
+    pub fn poses_superseded_total(&self) -> u64 {
+        self.poses_superseded_total.load(Ordering::Relaxed)
     }
 
     /// One intention left the service `latency` after the pose it answers arrived.
@@ -257,11 +269,15 @@ impl FleetMetrics {
              # TYPE fleet_replan_failures_total counter\nfleet_replan_failures_total {}\n\
              # HELP fleet_replans_reused_total Replans answered from the kept plan, no search.\n\
              # TYPE fleet_replans_reused_total counter\nfleet_replans_reused_total {}\n\
+             # HELP fleet_poses_superseded_total Poses replaced by a newer one before a worker \
+             took them (never answered).\n\
+             # TYPE fleet_poses_superseded_total counter\nfleet_poses_superseded_total {}\n\
              # HELP fleet_intentions_total Intentions published.\n\
              # TYPE fleet_intentions_total counter\nfleet_intentions_total {}",
             load(&self.replans_total),
             load(&self.replan_failures_total),
             load(&self.replans_reused_total),
+            load(&self.poses_superseded_total),
             load(&self.intentions_total)
         );
         let _ = writeln!(
@@ -345,8 +361,10 @@ mod tests {
         m.record_intention(Duration::from_millis(40));
         m.task_moved(None, TaskStateKind::Queued);
         m.task_moved(Some(TaskStateKind::Queued), TaskStateKind::Active);
+        m.record_superseded();
         let mut text = String::new();
         m.render_prometheus(&mut text);
+        assert!(text.contains("fleet_poses_superseded_total 1\n"));
         assert!(text.contains("fleet_replan_latency_seconds_bucket{le=\"0.001\"} 0"));
         assert!(text.contains("fleet_replan_latency_seconds_bucket{le=\"0.002\"} 1"));
         assert!(text.contains("fleet_replan_latency_seconds_bucket{le=\"0.05\"} 2"));

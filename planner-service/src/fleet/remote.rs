@@ -401,7 +401,7 @@ impl WorkerNode {
             pose,
             received: Instant::now(),
         };
-        robots
+        let superseded = robots
             .entry(robot.clone())
             .or_insert_with(|| {
                 let pose_key = keys::robot(&self.options.site, &robot, RobotTopic::Pose);
@@ -414,6 +414,9 @@ impl WorkerNode {
                 )
             })
             .send(arrival);
+        if superseded {
+            tracing::trace!("a pose was replaced before its worker took it");
+        }
     }
 
     /// Publishes `msg` on `key`; whether it went out (a failure is logged here).

@@ -14,6 +14,7 @@
 //! reports back.
 
 use std::collections::HashMap;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, Weak};
 use std::time::{Duration, Instant};
 
@@ -103,7 +104,12 @@ pub(crate) trait CycleHost: Send + Sync + 'static {
 /// The running worker of one robot: its pose slot and its task.
 #[derive(Debug)]
 pub(crate) struct Worker {
-    poses: watch::Sender<Option<Arrival>>,
+    /// The newest pose, numbered from 1 in the order handed over.
+    poses: watch::Sender<Option<(u64, Arrival)>>,
+    /// Poses handed over so far.
+    handed: AtomicU64,
+    /// The number of the newest pose the loop took.
+    taken: Arc<AtomicU64>,
     task: tokio::task::JoinHandle<()>,
 }
 
@@ -123,6 +129,8 @@ impl Worker {
         (session, pose_key): (Session, OwnedKeyExpr),
     ) -> Self {
         let (poses, rx) = watch::channel(None);
+        let taken = Arc::new(AtomicU64::new(0));
+        let took = Arc::clone(&taken);
         let task = runtime.spawn(async move {
             let declared = match session.declare_keyexpr(pose_key).await {
                 Ok(k) => Some(k),
@@ -131,19 +139,29 @@ impl Worker {
                     None
                 }
             };
-            run(host, id, rx, shutdown).await;
+            run(host, id, (rx, took), shutdown).await;
             if let Some(k) = declared {
                 if let Err(e) = session.undeclare(k).await {
                     tracing::debug!("pose key not undeclared: {e}");
                 }
             }
         });
-        Self { poses, task }
+        Self {
+            poses,
+            handed: AtomicU64::new(0),
+            taken,
+            task,
+        }
     }
 
-    /// Hands the worker the newest pose (replacing one it has not taken yet).
-    pub fn send(&self, arrival: Arrival) {
-        self.poses.send_replace(Some(arrival));
+    /// Hands the worker the newest pose, replacing one it has not taken yet; `true` when it
+    /// did (that pose is never answered: the worker was still planning an older one).
+    pub fn send(&self, arrival: Arrival) -> bool {
+        let n = self.handed.fetch_add(1, Ordering::Relaxed) + 1;
+        self.poses.send_replace(Some((n, arrival)));
+        // The loop records what it takes while it holds the slot, so this read, after the
+        // replacement, sees every take of the pose just replaced.
+        n > 1 && self.taken.load(Ordering::Acquire) < n - 1
     }
 
     pub fn abort(&self) {
@@ -193,7 +211,7 @@ impl Pipeline {
 async fn run<H: CycleHost>(
     host: Weak<H>,
     id: RobotId,
-    mut poses: watch::Receiver<Option<Arrival>>,
+    (mut poses, taken): (watch::Receiver<Option<(u64, Arrival)>>, Arc<AtomicU64>),
     mut shutdown: watch::Receiver<bool>,
 ) {
     let mut state = Some(Pipeline::default());
@@ -202,8 +220,13 @@ async fn run<H: CycleHost>(
             changed = poses.changed() => if changed.is_err() { break },
             _ = shutdown.changed() => break,
         }
-        let Some(arrival) = poses.borrow_and_update().clone() else {
-            continue;
+        let arrival = {
+            let slot = poses.borrow_and_update();
+            let Some((n, arrival)) = &*slot else {
+                continue;
+            };
+            taken.store(*n, Ordering::Release);
+            arrival.clone()
         };
         let Some(h) = host.upgrade() else {
             break;
@@ -395,5 +418,105 @@ impl PlanningMaps {
         Ok(Arc::clone(
             lock(&self.built).entry(key).or_insert(Arc::new(built)),
         ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::mpsc;
+
+    use protocol::{keys, MapRef, Pose2D, RobotTopic};
+
+    use super::*;
+
+    /// A host whose cycles stop at `begin` until the test lets each one go, so the test
+    /// decides when the worker is busy; it reports the pose sequence number of each cycle.
+    struct GatedHost {
+        begun: Mutex<mpsc::Sender<u64>>,
+        gate: Mutex<mpsc::Receiver<()>>,
+    }
+
+    impl CycleHost for GatedHost {
+        fn begin(&self, _id: &RobotId, pose: &PoseEstimate) -> Option<Cycle> {
+            lock(&self.begun).send(pose.header.seq).ok()?;
+            lock(&self.gate).recv().ok()?;
+            // No answer: the cycle ends here, as for a worker that cannot reach the service.
+            None
+        }
+
+        fn planning_map(&self, name: &MapName, _: u32) -> Result<Arc<PlanningMap>, FleetError> {
+            Err(FleetError::NotFound {
+                what: "map",
+                id: name.to_string(),
+            })
+        }
+
+        fn intention_config(&self) -> IntentionConfig {
+            IntentionConfig::default()
+        }
+
+        fn header(&self) -> Header {
+            Header::new(0, 0)
+        }
+
+        fn send_intention(&self, _: &RobotId, _: &Intention, _: Instant) -> Option<IntentionView> {
+            None
+        }
+
+        fn finish(&self, _: &RobotId, _: Outcome) {}
+    }
+
+    fn arrival(seq: u64) -> Arrival {
+        Arrival {
+            pose: PoseEstimate {
+                header: Header::new(seq, seq),
+                pose: Pose2D::new(1.0, 2.0, 0.0),
+                covariance: [0.01, 0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.0, 0.003],
+                sensor_stamp_ns: seq,
+                map: MapRef {
+                    name: MapName::new("junctions").unwrap(),
+                    version: 1,
+                },
+            },
+            received: Instant::now(),
+        }
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_pose_replaced_before_the_busy_worker_took_it_is_reported_and_never_planned() {
+        let session = protocol::zenoh_io::SessionArgs::new(&["tcp/127.0.0.1:0".into()], &[])
+            .open()
+            .await
+            .unwrap();
+        let (begun_tx, begun) = mpsc::channel();
+        let (release, gate) = mpsc::channel();
+        let host = Arc::new(GatedHost {
+            begun: Mutex::new(begun_tx),
+            gate: Mutex::new(gate),
+        });
+        let id = RobotId::new("r1").unwrap();
+        let (_stop, shutdown) = watch::channel(false);
+        let site = SiteId::new("site").unwrap();
+        let worker = Worker::spawn(
+            &tokio::runtime::Handle::current(),
+            Arc::downgrade(&host),
+            id.clone(),
+            shutdown,
+            (session, keys::robot(&site, &id, RobotTopic::Pose)),
+        );
+        let next_begun = |rx: &mpsc::Receiver<u64>| rx.recv_timeout(Duration::from_secs(10));
+
+        assert!(!worker.send(arrival(1)), "nothing was waiting");
+        assert_eq!(next_begun(&begun), Ok(1));
+        // The worker is busy with pose 1: pose 2 waits, pose 3 replaces it.
+        assert!(!worker.send(arrival(2)), "pose 1 was taken");
+        assert!(worker.send(arrival(3)), "pose 2 was never taken");
+        release.send(()).unwrap();
+        assert_eq!(next_begun(&begun), Ok(3), "the newest pose is planned next");
+        // Taken poses are never counted, however late the next one comes.
+        assert!(!worker.send(arrival(4)));
+        release.send(()).unwrap();
+        assert_eq!(next_begun(&begun), Ok(4));
+        release.send(()).unwrap();
     }
 }
