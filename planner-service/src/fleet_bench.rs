@@ -87,6 +87,8 @@ pub struct ModeFigures {
     /// Poses of the whole run (warm-up included) that the service's workers never took: a
     /// newer pose of the same robot replaced each while its worker was still planning.
     pub poses_superseded: u64,
+    /// Kept plans' due new searches run in the background over the whole run.
+    pub refresh_searches: u64,
     pub tasks_created: u64,
     pub tasks_completed: u64,
     /// Who replanned: the service and each worker process, with their replans and latency.
@@ -410,6 +412,7 @@ async fn run_mode(
                 replans: metrics.replans_total(),
                 kept_plan_answers: metrics.replans_reused_total(),
                 poses_superseded: metrics.poses_superseded_total(),
+                refresh_searches: metrics.refresh_searches_total(),
                 tasks_created,
                 tasks_completed: completed as u64,
                 workers: fleet.workers(),

@@ -33,7 +33,7 @@ pub use goals::{Advance, Goal, GoalProgress};
 pub use hybrid_astar::Planner;
 pub use intention::{
     stop_intention, Answer, DlmParams, IntentionConfig, IntentionPlanner, LpeImage, LpeParams,
-    Planned, ReuseParams,
+    Planned, RefreshJob, Refreshed, ReuseParams,
 };
 pub use map::{MapKey, PlanningMap};
 pub use path::{Path, PathStats};

@@ -188,6 +188,8 @@ fn a_kept_plan_answers_like_a_new_search_while_the_robot_follows_it() {
                 break;
             };
             let (Ok(a), Ok(b)) = (a, b) else { break };
+            // As the fleet's workers do once the answer has gone out.
+            kept.refresh().unwrap();
             cycles += 1;
             same_dlm += u32::from(a.dlm == b.dlm);
             reused += u32::from(b.reused);
@@ -290,7 +292,7 @@ fn a_kept_path_rejoins_ahead_of_the_robot() {
 }
 
 #[test]
-fn a_kept_plan_is_dropped_off_its_corridor_for_a_new_goal_and_after_max_cycles() {
+fn a_kept_plan_is_dropped_off_its_corridor_for_a_new_goal_and_searched_again_after_max_cycles() {
     let mut config = IntentionConfig::default();
     config.reuse.enabled = true;
     config.reuse.max_cycles = 3;
@@ -315,6 +317,25 @@ fn a_kept_plan_is_dropped_off_its_corridor_for_a_new_goal_and_after_max_cycles()
         .collect();
     assert_eq!(kinds, [true, true, true, false]);
     assert!(plan(&mut p, on_path, &goals).reused);
+    // The due search run after the third answer, off the answer's path: the fourth is
+    // answered from the new plan.
+    assert!(!p.refresh().unwrap(), "no search is due after one answer");
+    assert_eq!(
+        (0..2)
+            .map(|_| plan(&mut p, on_path, &goals).reused)
+            .collect::<Vec<_>>(),
+        [true, true]
+    );
+    assert!(
+        p.refresh().unwrap(),
+        "three answers in a row: the search ran"
+    );
+    assert!(!p.refresh().unwrap(), "and is not due again");
+    let after = (0..3)
+        .map(|_| plan(&mut p, on_path, &goals).reused)
+        .collect::<Vec<_>>();
+    assert_eq!(after, [true, true, true], "every answer from a plan");
+    assert!(p.refresh().unwrap());
     // Turned around: off the corridor's heading.
     let turned = Pose2D::new(on_path.x_m, on_path.y_m, on_path.yaw_rad + 2.0);
     assert!(!plan(&mut p, turned, &goals).reused);
@@ -331,4 +352,58 @@ fn a_kept_plan_is_dropped_off_its_corridor_for_a_new_goal_and_after_max_cycles()
     bad.reuse.corridor_m = f64::NAN;
     let err = IntentionPlanner::new(map, bad).err().expect("refused");
     assert!(err.to_string().contains("reuse.corridor_m"), "{err}");
+}
+
+/// A due search taken out of the pipeline runs elsewhere while the kept plan answers on; its
+/// result replaces the plan it refreshes, but not one searched since.
+#[test]
+fn a_due_search_runs_off_the_pipeline_and_only_refreshes_the_plan_it_was_taken_from() {
+    let mut config = IntentionConfig::default();
+    config.reuse.enabled = true;
+    config.reuse.max_cycles = 2;
+    let map = Arc::new(PlanningMap::new(test_support::nav2_map("depot"), &config.planner).unwrap());
+    let (start, end) = sample_pairs(&map, 1, 5, 6.0, "depot").unwrap()[0];
+    let mut p = IntentionPlanner::new(Arc::clone(&map), config.clone()).unwrap();
+    let mut elsewhere = planning::Planner::new(Arc::clone(&map), config.planner.clone()).unwrap();
+    let goals = [Goal::at(end.x_m, end.y_m)];
+    let plan = |p: &mut IntentionPlanner, pose: Pose2D| match p.answer(
+        &estimate(pose, 0),
+        &GoalProgress::new(&goals, 0),
+        false,
+    ) {
+        Answer::Heading { plan, .. } => plan.unwrap(),
+        Answer::Done => panic!("not done at {pose:?}"),
+    };
+    let first = plan(&mut p, start);
+    let on_path = along(&first.path, 0.1);
+    assert!(plan(&mut p, on_path).reused);
+    assert!(p.take_refresh().is_none(), "one answer: nothing due");
+    assert!(plan(&mut p, on_path).reused);
+    let job = p
+        .take_refresh()
+        .expect("two answers in a row: a search is due");
+    assert!(p.take_refresh().is_none(), "taken once");
+    // While it runs elsewhere, the kept plan answers beyond max_cycles.
+    for _ in 0..4 {
+        assert!(plan(&mut p, on_path).reused);
+    }
+    let refreshed = job.run(&mut elsewhere);
+    p.adopt(refreshed).unwrap();
+    assert!(plan(&mut p, on_path).reused, "the new plan answers");
+
+    // A search taken, then the robot turns off the corridor: the answer searches anew, and
+    // the stale result does not replace that plan.
+    assert!(plan(&mut p, on_path).reused);
+    let stale = p.take_refresh().expect("due again");
+    let turned = Pose2D::new(on_path.x_m, on_path.y_m, on_path.yaw_rad + 2.0);
+    assert!(!plan(&mut p, turned).reused);
+    let from_turned = plan(&mut p, turned);
+    assert!(from_turned.reused);
+    p.adopt(stale.run(&mut elsewhere)).unwrap();
+    let after = plan(&mut p, turned);
+    assert!(
+        after.reused,
+        "the stale plan, off the corridor here, would search"
+    );
+    assert_eq!(after.path, from_turned.path);
 }

@@ -599,6 +599,12 @@ pub fn run_with(
             if let Err(reason) = supervisor.on_intention(intention) {
                 tracing::warn!(scenario = %name, "intention refused: {reason}");
             }
+            // As the fleet's workers do once the intention is out.
+            for p in std::iter::once(&mut pipeline).chain(truth_pipeline.as_mut()) {
+                if let Err(e) = p.refresh() {
+                    tracing::debug!(scenario = %name, "the due new search found no path: {e}");
+                }
+            }
         }
         if reads_camera || record_camera {
             // Rendering draws no random numbers: recording the camera changes nothing else.

@@ -29,7 +29,7 @@ use super::error::{zenoh_err, FleetError};
 use super::remote::{CycleReport, CycleRequest};
 use super::types::{FleetEvent, IntentionView, Task};
 use super::{now_ns, Fleet, Now};
-use crate::fleet::worker::Arrival;
+use crate::fleet::worker::{Arrival, Worker};
 
 /// Something to publish, made under the core's lock and sent after it.
 #[derive(Debug)]
@@ -163,21 +163,23 @@ impl Fleet {
             wall_ns: now_ns(),
         };
         let watched = self.watched();
-        self.with_state(|state| {
+        let slot = self.with_state(|state| {
             let (seen, effects) = state.core.pose_arrived(&id, pose.clone(), now, watched);
             if seen.new {
                 self.start_worker(state, &id);
             }
             // While worker processes are alive they plan every robot.
-            if state.remote.is_empty() {
-                if let Some(w) = state.workers.get(&id) {
-                    if w.send(Arrival { pose, received }) {
-                        self.metrics.record_superseded();
-                    }
-                }
-            }
-            ((), effects)
+            let slot = if state.remote.is_empty() {
+                state.workers.get(&id).map(Worker::slot)
+            } else {
+                None
+            };
+            (slot, effects)
         });
+        // Outside the lock: waking the worker is a system call, and every cycle takes the lock.
+        if slot.is_some_and(|s| s.send(Arrival { pose, received })) {
+            self.metrics.record_superseded();
+        }
     }
 
     fn on_status(&self, sample: &Sample) {

@@ -126,6 +126,8 @@ pub struct FleetMetrics {
     replan_failures_total: AtomicU64,
     replans_reused_total: AtomicU64,
     poses_superseded_total: AtomicU64,
+    refresh_searches_total: AtomicU64,
+    refresh_failures_total: AtomicU64,
     intentions_total: AtomicU64,
     latency: LatencyHistogram,
     robots_online: AtomicI64,
@@ -161,6 +163,19 @@ impl FleetMetrics {
     #[must_use]
     pub fn poses_superseded_total(&self) -> u64 {
         self.poses_superseded_total.load(Ordering::Relaxed)
+    }
+
+    /// A kept plan's due new search came back from the background (`ok`: it found a path).
+    pub fn record_refresh(&self, ok: bool) {
+        self.refresh_searches_total.fetch_add(1, Ordering::Relaxed);
+        if !ok {
+            self.refresh_failures_total.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    #[must_use]
+    pub fn refresh_searches_total(&self) -> u64 {
+        self.refresh_searches_total.load(Ordering::Relaxed)
     }
 
     /// One intention left the service `latency` after the pose it answers arrived.
@@ -272,12 +287,19 @@ impl FleetMetrics {
              # HELP fleet_poses_superseded_total Poses replaced by a newer one before a worker \
              took them (never answered).\n\
              # TYPE fleet_poses_superseded_total counter\nfleet_poses_superseded_total {}\n\
+             # HELP fleet_refresh_searches_total Kept plans' due new searches run in the \
+             background.\n\
+             # TYPE fleet_refresh_searches_total counter\nfleet_refresh_searches_total {}\n\
+             # HELP fleet_refresh_failures_total Of those, the ones that found no path.\n\
+             # TYPE fleet_refresh_failures_total counter\nfleet_refresh_failures_total {}\n\
              # HELP fleet_intentions_total Intentions published.\n\
              # TYPE fleet_intentions_total counter\nfleet_intentions_total {}",
             load(&self.replans_total),
             load(&self.replan_failures_total),
             load(&self.replans_reused_total),
             load(&self.poses_superseded_total),
+            load(&self.refresh_searches_total),
+            load(&self.refresh_failures_total),
             load(&self.intentions_total)
         );
         let _ = writeln!(
@@ -362,9 +384,13 @@ mod tests {
         m.task_moved(None, TaskStateKind::Queued);
         m.task_moved(Some(TaskStateKind::Queued), TaskStateKind::Active);
         m.record_superseded();
+        m.record_refresh(true);
+        m.record_refresh(false);
         let mut text = String::new();
         m.render_prometheus(&mut text);
         assert!(text.contains("fleet_poses_superseded_total 1\n"));
+        assert!(text.contains("fleet_refresh_searches_total 2\n"));
+        assert!(text.contains("fleet_refresh_failures_total 1\n"));
         assert!(text.contains("fleet_replan_latency_seconds_bucket{le=\"0.001\"} 0"));
         assert!(text.contains("fleet_replan_latency_seconds_bucket{le=\"0.002\"} 1"));
         assert!(text.contains("fleet_replan_latency_seconds_bucket{le=\"0.05\"} 2"));

@@ -37,6 +37,7 @@ pub mod types;
 
 mod adapter;
 mod publishers;
+mod refresh;
 mod worker;
 
 use std::collections::{BTreeSet, HashMap};
@@ -146,6 +147,8 @@ pub struct Fleet {
     store: Arc<TaskStore>,
     maps: Arc<MapStore>,
     planning: PlanningMaps,
+    /// Kept plans' due new searches, below the answers' priority.
+    refresh: refresh::RefreshPool,
     state: Mutex<State>,
     /// Announcements in the order the core made them, to the publisher task.
     outbox: mpsc::UnboundedSender<Outgoing>,
@@ -202,6 +205,7 @@ impl Fleet {
                 MapSource::Store(Arc::clone(&maps)),
                 config.planner.clone(),
             ),
+            refresh: refresh::RefreshPool::start(cores()),
             maps,
             config,
             runtime: tokio::runtime::Handle::current(),
@@ -663,6 +667,19 @@ impl CycleHost for Fleet {
     fn finish(&self, id: &RobotId, outcome: Outcome) {
         self.finish_cycle(SERVICE_WORKER, id, outcome);
     }
+
+    fn refresh_pool(&self) -> &refresh::RefreshPool {
+        &self.refresh
+    }
+
+    fn refreshed(&self, ok: bool) {
+        self.metrics.record_refresh(ok);
+    }
+}
+
+/// The cores this process may use (its affinity, e.g. `taskset`).
+pub(crate) fn cores() -> usize {
+    std::thread::available_parallelism().map_or(1, std::num::NonZero::get)
 }
 
 /// Sweeps finished tasks every `[fleet] retention_sweep_interval_s` until shutdown.

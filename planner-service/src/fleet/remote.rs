@@ -37,6 +37,7 @@ use zenoh::{Session, Wait};
 use super::core::Cycle;
 use super::error::{zenoh_err, FleetError};
 use super::publishers::Publishers;
+use super::refresh::RefreshPool;
 use super::types::IntentionView;
 use super::worker::{Arrival, CycleHost, MapSource, Outcome, PlanningMaps, Worker};
 use super::{lock, now_ns, rendezvous};
@@ -233,6 +234,8 @@ pub struct WorkerNode {
     cycles: AtomicU64,
     /// One plan at a time per core this process may use (its affinity, e.g. `taskset`).
     planning_slots: Arc<Semaphore>,
+    /// Kept plans' due new searches, below the answers' priority.
+    refresh: RefreshPool,
 }
 
 impl WorkerNode {
@@ -273,9 +276,8 @@ impl WorkerNode {
             io: Mutex::new(WorkerIo::default()),
             seq: AtomicU64::new(0),
             cycles: AtomicU64::new(0),
-            planning_slots: Arc::new(Semaphore::new(
-                std::thread::available_parallelism().map_or(1, std::num::NonZero::get),
-            )),
+            planning_slots: Arc::new(Semaphore::new(super::cores())),
+            refresh: RefreshPool::start(super::cores()),
         });
         let me = Arc::downgrade(&node);
         let members = node
@@ -511,6 +513,10 @@ impl CycleHost for WorkerNode {
 
     fn planning_slots(&self) -> Option<&Arc<Semaphore>> {
         Some(&self.planning_slots)
+    }
+
+    fn refresh_pool(&self) -> &RefreshPool {
+        &self.refresh
     }
 
     fn finish(&self, id: &RobotId, outcome: Outcome) {

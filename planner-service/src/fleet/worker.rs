@@ -32,6 +32,7 @@ use super::book::Decision;
 use super::core::Cycle;
 use super::error::FleetError;
 use super::lock;
+use super::refresh::{RefreshPool, RefreshReply};
 use super::types::IntentionView;
 
 /// A pose and when it reached the process that plans it (for the intention latency).
@@ -99,18 +100,41 @@ pub(crate) trait CycleHost: Send + Sync + 'static {
     fn planning_slots(&self) -> Option<&Arc<Semaphore>> {
         None
     }
+    /// Where kept plans' due new searches run.
+    fn refresh_pool(&self) -> &RefreshPool;
+    /// A due new search came back (`ok`: it found a path).
+    fn refreshed(&self, _ok: bool) {}
 }
 
 /// The running worker of one robot: its pose slot and its task.
 #[derive(Debug)]
 pub(crate) struct Worker {
+    slot: Arc<PoseSlot>,
+    task: tokio::task::JoinHandle<()>,
+}
+
+/// Where a worker takes its poses from. Shared, so that a caller can look it up under a lock
+/// and hand the pose over after releasing it (waking the worker is a system call).
+#[derive(Debug)]
+pub(crate) struct PoseSlot {
     /// The newest pose, numbered from 1 in the order handed over.
     poses: watch::Sender<Option<(u64, Arrival)>>,
     /// Poses handed over so far.
     handed: AtomicU64,
     /// The number of the newest pose the loop took.
     taken: Arc<AtomicU64>,
-    task: tokio::task::JoinHandle<()>,
+}
+
+impl PoseSlot {
+    /// Hands the worker the newest pose, replacing one it has not taken yet; `true` when it
+    /// did (that pose is never answered: the worker was still planning an older one).
+    pub fn send(&self, arrival: Arrival) -> bool {
+        let n = self.handed.fetch_add(1, Ordering::Relaxed) + 1;
+        self.poses.send_replace(Some((n, arrival)));
+        // The loop records what it takes while it holds the slot, so this read, after the
+        // replacement, sees every take of the pose just replaced.
+        n > 1 && self.taken.load(Ordering::Acquire) < n - 1
+    }
 }
 
 impl Worker {
@@ -146,22 +170,22 @@ impl Worker {
                 }
             }
         });
-        Self {
+        let slot = Arc::new(PoseSlot {
             poses,
             handed: AtomicU64::new(0),
             taken,
-            task,
-        }
+        });
+        Self { slot, task }
     }
 
-    /// Hands the worker the newest pose, replacing one it has not taken yet; `true` when it
-    /// did (that pose is never answered: the worker was still planning an older one).
+    /// As [`PoseSlot::send`].
     pub fn send(&self, arrival: Arrival) -> bool {
-        let n = self.handed.fetch_add(1, Ordering::Relaxed) + 1;
-        self.poses.send_replace(Some((n, arrival)));
-        // The loop records what it takes while it holds the slot, so this read, after the
-        // replacement, sees every take of the pose just replaced.
-        n > 1 && self.taken.load(Ordering::Acquire) < n - 1
+        self.slot.send(arrival)
+    }
+
+    /// The worker's pose slot, to hand poses over outside the lock that keeps the worker.
+    pub fn slot(&self) -> Arc<PoseSlot> {
+        Arc::clone(&self.slot)
     }
 
     pub fn abort(&self) {
@@ -215,10 +239,27 @@ async fn run<H: CycleHost>(
     mut shutdown: watch::Receiver<bool>,
 ) {
     let mut state = Some(Pipeline::default());
+    // The kept plan's due new search, while the pool runs it.
+    let mut refreshing: Option<RefreshReply> = None;
     loop {
         tokio::select! {
             changed = poses.changed() => if changed.is_err() { break },
             _ = shutdown.changed() => break,
+            refreshed = async { refreshing.as_mut()?.await.ok() }, if refreshing.is_some() => {
+                refreshing = None;
+                let planner = state.as_mut().and_then(|st| st.planner.as_mut());
+                // No result: the pool is gone, and so is the host (the loop ends next).
+                if let (Some(r), Some(p)) = (refreshed, planner) {
+                    let adopted = p.adopt(r);
+                    if let Err(e) = &adopted {
+                        tracing::debug!(robot = %id, "the due new search found no path: {e}");
+                    }
+                    if let Some(h) = host.upgrade() {
+                        h.refreshed(adopted.is_ok());
+                    }
+                }
+                continue;
+            }
         }
         let arrival = {
             let slot = poses.borrow_and_update();
@@ -268,7 +309,14 @@ async fn run<H: CycleHost>(
             }
         };
         match done {
-            Ok(st) => state = Some(st),
+            Ok(mut st) => {
+                // The answer is out: a new search it left due runs in the background.
+                let job = st.planner.as_mut().and_then(IntentionPlanner::take_refresh);
+                if let (Some(job), Some(h)) = (job, host.upgrade()) {
+                    refreshing = Some(h.refresh_pool().submit(job));
+                }
+                state = Some(st);
+            }
             Err(e) => {
                 tracing::error!(robot = %id, "replanning worker failed: {e}");
                 state = Some(Pipeline::default());
@@ -434,6 +482,7 @@ mod tests {
     struct GatedHost {
         begun: Mutex<mpsc::Sender<u64>>,
         gate: Mutex<mpsc::Receiver<()>>,
+        pool: RefreshPool,
     }
 
     impl CycleHost for GatedHost {
@@ -464,6 +513,10 @@ mod tests {
         }
 
         fn finish(&self, _: &RobotId, _: Outcome) {}
+
+        fn refresh_pool(&self) -> &RefreshPool {
+            &self.pool
+        }
     }
 
     fn arrival(seq: u64) -> Arrival {
@@ -493,6 +546,7 @@ mod tests {
         let host = Arc::new(GatedHost {
             begun: Mutex::new(begun_tx),
             gate: Mutex::new(gate),
+            pool: RefreshPool::start(1),
         });
         let id = RobotId::new("r1").unwrap();
         let (_stop, shutdown) = watch::channel(false);

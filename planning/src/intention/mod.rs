@@ -12,5 +12,8 @@ pub mod reuse;
 
 pub use dlm::{dlm_from_path, DlmParams};
 pub use lpe::{render_lpe, LpeImage, LpeParams};
-pub use pipeline::{stop_intention, thin_path, Answer, IntentionConfig, IntentionPlanner, Planned};
+pub use pipeline::{
+    stop_intention, thin_path, Answer, IntentionConfig, IntentionPlanner, Planned, RefreshJob,
+    Refreshed,
+};
 pub use reuse::{KeptPlan, KeptRest, ReuseParams};

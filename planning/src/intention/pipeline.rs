@@ -144,6 +144,20 @@ pub struct IntentionPlanner {
     config: IntentionConfig,
     trail: VecDeque<Pose2D>,
     kept: Option<KeptPlan>,
+    /// The new search that kept answers left due (see [`Self::take_refresh`]).
+    refresh: Refresh,
+    /// Counts kept plans, so a search's result is adopted only by the plan it refreshes.
+    generation: u64,
+}
+
+/// Where the due new search of a kept plan stands.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Refresh {
+    Idle,
+    /// Due, from the pose of the answer that made it due.
+    Due(Pose2D),
+    /// Taken by the caller ([`IntentionPlanner::take_refresh`]); the kept plan answers on.
+    Running,
 }
 
 impl IntentionPlanner {
@@ -184,6 +198,8 @@ impl IntentionPlanner {
             config,
             trail: VecDeque::new(),
             kept: None,
+            refresh: Refresh::Idle,
+            generation: 0,
         })
     }
 
@@ -209,7 +225,7 @@ impl IntentionPlanner {
         self.fixed.set_map(Arc::clone(&map))?;
         self.free.set_map(map)?;
         self.trail.clear();
-        self.kept = None;
+        self.drop_kept();
         Ok(())
     }
 
@@ -217,7 +233,86 @@ impl IntentionPlanner {
     /// elsewhere).
     pub fn clear_trail(&mut self) {
         self.trail.clear();
+        self.drop_kept();
+    }
+
+    fn drop_kept(&mut self) {
         self.kept = None;
+        self.refresh = Refresh::Idle;
+    }
+
+    /// The new search that the last answers left due ([`ReuseParams::max_cycles`] answers in a
+    /// row from the kept plan), to run off the pose-to-intention path: on another thread, at
+    /// a lower priority, while the kept plan goes on answering. Hand its result to
+    /// [`Self::adopt`]. `None`: none is due. An answer that finds a due search not taken runs
+    /// it first, from its own pose.
+    pub fn take_refresh(&mut self) -> Option<RefreshJob> {
+        let Refresh::Due(from) = self.refresh else {
+            return None;
+        };
+        let (goal, free_heading) = self.kept.as_ref().map(KeptPlan::goal)?;
+        self.refresh = Refresh::Running;
+        let planner = if free_heading {
+            &self.free
+        } else {
+            &self.fixed
+        };
+        Some(RefreshJob {
+            map: Arc::clone(planner.map()),
+            planner: planner.config().clone(),
+            from,
+            goal,
+            free_heading,
+            generation: self.generation,
+        })
+    }
+
+    /// Takes the result of a [`RefreshJob`]: the new plan replaces the kept one it refreshes
+    /// (one searched since, or a new map or goal, wins). A search that found no path leaves
+    /// the kept plan, which still holds, answering, and another search due after
+    /// `max_cycles` more of its answers.
+    ///
+    /// # Errors
+    /// The search's own error, handed back for the caller to report.
+    pub fn adopt(&mut self, refreshed: Result<Refreshed, PlanError>) -> Result<(), PlanError> {
+        if self.refresh != Refresh::Running {
+            return Ok(());
+        }
+        self.refresh = Refresh::Idle;
+        match refreshed {
+            Ok(r) => {
+                if r.generation == self.generation {
+                    self.generation += 1;
+                    self.kept = Some(r.kept);
+                }
+                Ok(())
+            }
+            Err(e) => {
+                if let Some(k) = self.kept.as_mut() {
+                    k.postpone_refresh();
+                }
+                Err(e)
+            }
+        }
+    }
+
+    /// Runs the due new search here, on the pipeline's own planner ([`Self::take_refresh`],
+    /// the job, [`Self::adopt`] in one): what a caller without another thread does once its
+    /// answer has gone out. `Ok(false)`: none was due.
+    ///
+    /// # Errors
+    /// As [`Self::adopt`].
+    pub fn refresh(&mut self) -> Result<bool, PlanError> {
+        let Some(job) = self.take_refresh() else {
+            return Ok(false);
+        };
+        let planner = if job.free_heading {
+            &mut self.free
+        } else {
+            &mut self.fixed
+        };
+        let refreshed = job.run(planner);
+        self.adopt(refreshed).map(|()| true)
     }
 
     /// Where `pose` leaves the robot on its goals (no planning).
@@ -262,6 +357,10 @@ impl IntentionPlanner {
         free_heading: bool,
         render_lpe: bool,
     ) -> Result<Planned, PlanError> {
+        // The caller did not take the search the last answer left due: it answers now.
+        if let Refresh::Due(_) = self.refresh {
+            self.drop_kept();
+        }
         let kept_rest = self.kept.as_mut().and_then(|k| {
             k.follow(
                 self.fixed.map(),
@@ -276,6 +375,7 @@ impl IntentionPlanner {
             Some(rest) => (rest.poses, rest.length_m),
             None => {
                 let path = self.search(robot, goal, free_heading)?;
+                self.generation += 1;
                 self.kept = self.config.reuse.enabled.then(|| {
                     KeptPlan::new(
                         self.fixed.map().key(),
@@ -287,6 +387,15 @@ impl IntentionPlanner {
                 (path.poses, path.length_m)
             }
         };
+        if reused
+            && self.refresh == Refresh::Idle
+            && self
+                .kept
+                .as_ref()
+                .is_some_and(|k| k.refresh_due(&self.config.reuse))
+        {
+            self.refresh = Refresh::Due(robot);
+        }
         let dlm = dlm_from_path(&poses, robot, &self.config.dlm);
         let lpe = if render_lpe {
             let trail: Vec<Pose2D> = self.trail.iter().copied().collect();
@@ -317,23 +426,75 @@ impl IntentionPlanner {
         } else {
             &mut self.fixed
         };
-        match planner.plan(robot, goal) {
-            // A pose estimate that grazes a wall (a cut corner, a few cm of AMCL error) is no
-            // reason to stop for good: plan from the nearest free pose and lead there first.
-            Err(
-                e @ PlanError::InCollision {
-                    which: Endpoint::Start,
-                    ..
-                },
-            ) => {
-                let free = nearest_free_start(planner.map(), robot).ok_or(e)?;
-                let mut path = planner.plan(free, goal)?;
-                path.poses.insert(0, robot);
-                path.length_m += robot.distance_m(&free);
-                Ok(path)
-            }
-            other => other,
+        search_from(planner, robot, goal)
+    }
+}
+
+/// A kept plan's due new search, taken out of its pipeline to run elsewhere
+/// ([`IntentionPlanner::take_refresh`]).
+#[derive(Debug, Clone)]
+pub struct RefreshJob {
+    map: Arc<PlanningMap>,
+    planner: PlannerConfig,
+    from: Pose2D,
+    goal: Pose2D,
+    free_heading: bool,
+    generation: u64,
+}
+
+/// A [`RefreshJob`]'s new plan, for [`IntentionPlanner::adopt`].
+#[derive(Debug, Clone)]
+pub struct Refreshed {
+    kept: KeptPlan,
+    generation: u64,
+}
+
+impl RefreshJob {
+    /// The configuration of the planner the search runs on.
+    #[must_use]
+    pub fn planner_config(&self) -> &PlannerConfig {
+        &self.planner
+    }
+
+    /// The map the search runs on.
+    #[must_use]
+    pub fn map(&self) -> &Arc<PlanningMap> {
+        &self.map
+    }
+
+    /// Runs the search on `planner`, one made with [`Self::planner_config`] (its buffers are
+    /// reused; it is moved to the job's map).
+    ///
+    /// # Errors
+    /// No path from the job's pose, or `planner` was made for another robot radius.
+    pub fn run(self, planner: &mut Planner) -> Result<Refreshed, PlanError> {
+        planner.set_map(Arc::clone(&self.map))?;
+        let path = search_from(planner, self.from, self.goal)?;
+        Ok(Refreshed {
+            kept: KeptPlan::new(self.map.key(), self.goal, self.free_heading, path.poses),
+            generation: self.generation,
+        })
+    }
+}
+
+/// A new hybrid-A* search from `robot` to `goal` on `planner`.
+fn search_from(planner: &mut Planner, robot: Pose2D, goal: Pose2D) -> Result<Path, PlanError> {
+    match planner.plan(robot, goal) {
+        // A pose estimate that grazes a wall (a cut corner, a few cm of AMCL error) is no
+        // reason to stop for good: plan from the nearest free pose and lead there first.
+        Err(
+            e @ PlanError::InCollision {
+                which: Endpoint::Start,
+                ..
+            },
+        ) => {
+            let free = nearest_free_start(planner.map(), robot).ok_or(e)?;
+            let mut path = planner.plan(free, goal)?;
+            path.poses.insert(0, robot);
+            path.length_m += robot.distance_m(&free);
+            Ok(path)
         }
+        other => other,
     }
 }
 

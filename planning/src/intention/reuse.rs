@@ -4,9 +4,11 @@
 //! map version and the goal are the same, and a new hybrid-A* search returns the same route
 //! from a point a few centimetres further along. [`KeptPlan`] keeps the last searched path and
 //! answers such a cycle with the rest of it instead; it asks for a new search when the map or
-//! the goal changed, when the robot left a corridor around the path (position and heading), at
-//! the path's end, or after `max_cycles` reused answers in a row, so a better route that only
-//! shows from further along is still found within a bounded time.
+//! the goal changed, when the robot left a corridor around the path (position and heading), or
+//! at the path's end. After `max_cycles` reused answers in a row a new search is *due*, so a
+//! better route that only shows from further along is still found within a bounded time: the
+//! caller runs it after sending the answer ([`crate::IntentionPlanner::refresh`]), off the
+//! pose-to-intention path, or the next answer runs it first.
 
 use serde::{Deserialize, Serialize};
 
@@ -26,7 +28,7 @@ pub struct ReuseParams {
     pub corridor_m: f64,
     /// ... and its heading within this angle of the path's there.
     pub corridor_yaw_rad: f64,
-    /// A new search after this many reused answers in a row.
+    /// A new search is due after this many reused answers in a row.
     pub max_cycles: u32,
     /// The answered path goes from the robot straight to the kept path's pose this far along
     /// it past the robot's nearest: a shallow merge like a new search's, not a sideways kink at
@@ -132,8 +134,26 @@ impl KeptPlan {
         }
     }
 
-    /// The rest of the kept path from `robot` (the robot's pose first), or `None` when a new
-    /// search is due (see the module docs).
+    /// Whether a new search is due: `max_cycles` answers in a row came from this plan.
+    #[must_use]
+    pub fn refresh_due(&self, params: &ReuseParams) -> bool {
+        self.reused >= params.max_cycles
+    }
+
+    /// Puts the due search off by another `max_cycles` answers (the search failed while the
+    /// plan still holds).
+    pub fn postpone_refresh(&mut self) {
+        self.reused = 0;
+    }
+
+    /// The goal the plan leads to, and whether its heading is free.
+    #[must_use]
+    pub fn goal(&self) -> (Pose2D, bool) {
+        (self.goal, self.free_heading)
+    }
+
+    /// The rest of the kept path from `robot` (the robot's pose first), or `None` when the
+    /// plan no longer holds there and a new search must answer (see the module docs).
     pub fn follow(
         &mut self,
         map: &PlanningMap,
@@ -148,11 +168,7 @@ impl KeptPlan {
             && goal.x_m == self.goal.x_m
             && goal.y_m == self.goal.y_m
             && (free_heading || goal.yaw_rad == self.goal.yaw_rad);
-        if !params.enabled
-            || map.key() != self.map
-            || !same_goal
-            || self.reused >= params.max_cycles
-        {
+        if !params.enabled || map.key() != self.map || !same_goal {
             return None;
         }
         let index = self.along + nearest_index(self.poses.get(self.along..)?, robot)?;
