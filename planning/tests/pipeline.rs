@@ -168,6 +168,8 @@ fn a_kept_plan_answers_like_a_new_search_while_the_robot_follows_it() {
     let mut other = IntentionPlanner::new(Arc::clone(&map), IntentionConfig::default()).unwrap();
     let (mut cycles, mut same_dlm, mut reused, mut longer) = (0_u32, 0_u32, 0_u32, 0_u32);
     let mut same_reference = 0_u32;
+    // Per cycle, the share of the LPE image's pixels that differ between the two answers.
+    let mut lpe_differs: Vec<f64> = Vec::new();
     for (k, (start, end)) in pairs.iter().enumerate() {
         let goals = [Goal::at(end.x_m, end.y_m)];
         let progress = GoalProgress::new(&goals, 0);
@@ -182,12 +184,15 @@ fn a_kept_plan_answers_like_a_new_search_while_the_robot_follows_it() {
             );
             let pose = estimate(reported, step);
             let (Answer::Heading { plan: a, .. }, Answer::Heading { plan: b, .. }) = (
-                fresh.answer(&pose, &progress, false),
-                kept.answer(&pose, &progress, false),
+                fresh.answer(&pose, &progress, true),
+                kept.answer(&pose, &progress, true),
             ) else {
                 break;
             };
             let (Ok(a), Ok(b)) = (a, b) else { break };
+            if let (Some(la), Some(lb)) = (&a.lpe, &b.lpe) {
+                lpe_differs.push(differing_share(&la.image, &lb.image));
+            }
             // As the fleet's workers do once the answer has gone out.
             kept.refresh().unwrap();
             cycles += 1;
@@ -220,7 +225,26 @@ fn a_kept_plan_answers_like_a_new_search_while_the_robot_follows_it() {
         "{cycles} cycles: same DLM {same_dlm}, kept plan answered {reused}, kept route over 1.2x a new search's {longer}; \
          a new search with other jitter gives the same DLM in {same_reference}"
     );
+    lpe_differs.sort_by(f64::total_cmp);
+    let lpe_mean = lpe_differs.iter().sum::<f64>() / lpe_differs.len() as f64;
+    let lpe_p99 = lpe_differs[lpe_differs.len() * 99 / 100];
+    println!(
+        "LPE image: {:.2} % of pixels differ on average, {:.2} % at the 99th percentile, {:.2} % at most",
+        100.0 * lpe_mean,
+        100.0 * lpe_p99,
+        100.0 * lpe_differs[lpe_differs.len() - 1]
+    );
     assert!(cycles > 300, "{cycles} cycles");
+    assert_eq!(
+        lpe_differs.len(),
+        cycles as usize,
+        "every answer has its image"
+    );
+    // Measured 2026-11-26: see docs/benchmarks.md, "Path reuse".
+    assert!(
+        lpe_mean < 0.02,
+        "LPE images differ in {lpe_mean:.4} of pixels"
+    );
     let same = f64::from(same_dlm) / f64::from(cycles);
     let repeatable = f64::from(same_reference) / f64::from(cycles);
     let kept_share = f64::from(reused) / f64::from(cycles);
@@ -408,4 +432,11 @@ fn a_due_search_runs_off_the_pipeline_and_only_refreshes_the_plan_it_was_taken_f
         "the stale plan, off the corridor here, would search"
     );
     assert_eq!(after.path, from_turned.path);
+}
+
+/// The share of pixels whose colour differs between two images of the same size.
+fn differing_share(a: &image::RgbImage, b: &image::RgbImage) -> f64 {
+    assert_eq!(a.dimensions(), b.dimensions());
+    let differ = a.pixels().zip(b.pixels()).filter(|(p, q)| p != q).count();
+    differ as f64 / f64::from(a.width() * a.height())
 }

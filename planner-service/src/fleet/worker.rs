@@ -6,7 +6,9 @@
 //! never queues up, and workers of different robots run in parallel on the blocking pool. A
 //! worker owns its robot's [`IntentionPlanner`]; the planning itself (goal advancement,
 //! hybrid A*, DLM, LPE, path thinning) is the planning crate's, called through
-//! [`IntentionPlanner::answer`].
+//! [`IntentionPlanner::answer`]. A new search that the robot's kept plan left due goes, once the
+//! answer is out, to the host's low-priority [`RefreshPool`]; the worker adopts its plan when
+//! it comes back, answering from the kept plan meanwhile.
 //!
 //! The cycle is the same wherever it runs; what differs is behind [`CycleHost`]: the service
 //! process itself (its task book under its lock, its own map store), or a worker process
