@@ -50,7 +50,7 @@ impl RefreshPool {
     }
 
     /// Queues `job`; its result comes back on the receiver (dropped unanswered when the pool
-    /// is gone).
+    /// is gone). The queue needs no bound: a robot has at most one search due at a time.
     pub fn submit(&self, job: RefreshJob) -> RefreshReply {
         let (reply, rx) = oneshot::channel();
         // A send fails only once every thread has ended: the reply is dropped with the job.
