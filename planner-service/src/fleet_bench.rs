@@ -84,8 +84,9 @@ pub struct ModeFigures {
     /// Replans of robots with a task, and of those the answers from a kept plan (no search).
     pub replans: u64,
     pub kept_plan_answers: u64,
-    /// Poses of the whole run (warm-up included) that the service's workers never took: a
-    /// newer pose of the same robot replaced each while its worker was still planning.
+    /// Poses of the whole run (warm-up included) that a robot's worker (in the service or a
+    /// worker process) never took: a newer pose of the same robot replaced each while its
+    /// worker was still planning.
     pub poses_superseded: u64,
     /// Kept plans' due new searches run in the background over the whole run.
     pub refresh_searches: u64,

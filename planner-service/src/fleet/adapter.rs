@@ -178,7 +178,7 @@ impl Fleet {
         });
         // Outside the lock: waking the worker is a system call, and every cycle takes the lock.
         if slot.is_some_and(|s| s.send(Arrival { pose, received })) {
-            self.metrics.record_superseded();
+            self.metrics.record_superseded(1);
         }
     }
 
@@ -295,6 +295,7 @@ impl Fleet {
         };
         match protocol::decode_sample::<CycleReport>(sample) {
             Ok(report) => {
+                self.metrics.record_superseded(u64::from(report.superseded));
                 let worker = report.worker_id.to_string();
                 self.finish_cycle(&worker, &robot, report.into_outcome());
             }

@@ -154,10 +154,10 @@ impl FleetMetrics {
         self.replans_reused_total.load(Ordering::Relaxed)
     }
 
-    /// A pose was replaced by a newer one before its robot's worker took it: it is never
-    /// answered, because the worker was still planning an older pose.
-    pub fn record_superseded(&self) {
-        self.poses_superseded_total.fetch_add(1, Ordering::Relaxed);
+    /// `n` poses were replaced by a newer one before their robot's worker took them: they are
+    /// never answered, because the worker was still planning an older pose.
+    pub fn record_superseded(&self, n: u64) {
+        self.poses_superseded_total.fetch_add(n, Ordering::Relaxed);
     }
 
     #[must_use]
@@ -383,7 +383,7 @@ mod tests {
         m.record_intention(Duration::from_millis(40));
         m.task_moved(None, TaskStateKind::Queued);
         m.task_moved(Some(TaskStateKind::Queued), TaskStateKind::Active);
-        m.record_superseded();
+        m.record_superseded(1);
         m.record_refresh(true);
         m.record_refresh(false);
         let mut text = String::new();

@@ -98,6 +98,10 @@ pub struct CycleReport {
     /// The intention that went out to the robot, with its latency on the worker.
     pub sent: Option<IntentionView>,
     pub preview: Option<PreviewSize>,
+    /// Poses the worker let a newer one replace before it took them, since its last report
+    /// (any robot's: the service counts them all as `fleet_poses_superseded_total`).
+    #[serde(default)]
+    pub superseded: u32,
     #[serde(skip)]
     pub preview_rgb: Vec<u8>,
 }
@@ -164,6 +168,7 @@ impl CycleReport {
             result,
             sent,
             preview,
+            superseded: 0,
             preview_rgb: lpe.map(|l| l.image.into_raw()).unwrap_or_default(),
         }
     }
@@ -236,6 +241,8 @@ pub struct WorkerNode {
     planning_slots: Arc<Semaphore>,
     /// Kept plans' due new searches, below the answers' priority.
     refresh: RefreshPool,
+    /// Poses superseded since the last report went out (see [`CycleReport::superseded`]).
+    superseded: AtomicU64,
 }
 
 impl WorkerNode {
@@ -278,6 +285,7 @@ impl WorkerNode {
             cycles: AtomicU64::new(0),
             planning_slots: Arc::new(Semaphore::new(super::cores())),
             refresh: RefreshPool::start(super::cores()),
+            superseded: AtomicU64::new(0),
         });
         let me = Arc::downgrade(&node);
         let members = node
@@ -417,7 +425,7 @@ impl WorkerNode {
             })
             .send(arrival);
         if superseded {
-            tracing::trace!("a pose was replaced before its worker took it");
+            self.superseded.fetch_add(1, Ordering::Relaxed);
         }
     }
 
@@ -521,7 +529,9 @@ impl CycleHost for WorkerNode {
 
     fn finish(&self, id: &RobotId, outcome: Outcome) {
         self.cycles.fetch_add(1, Ordering::Relaxed);
-        let report = CycleReport::of(self.header(), self.options.id.clone(), outcome);
+        let mut report = CycleReport::of(self.header(), self.options.id.clone(), outcome);
+        let superseded = self.superseded.swap(0, Ordering::Relaxed);
+        report.superseded = u32::try_from(superseded).unwrap_or(u32::MAX);
         self.put(&keys::cycle_outcome(&self.options.site, id), &report);
     }
 }
@@ -555,7 +565,8 @@ mod tests {
             }),
             reused: true,
         };
-        let report = CycleReport::of(Header::new(1, 2), WorkerId::new("w1").unwrap(), outcome);
+        let mut report = CycleReport::of(Header::new(1, 2), WorkerId::new("w1").unwrap(), outcome);
+        report.superseded = 3;
         let bytes = protocol::encode(&report).unwrap();
         let back: CycleReport = protocol::decode(&bytes).unwrap();
         assert_eq!(back, report);
