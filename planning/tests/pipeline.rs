@@ -326,14 +326,7 @@ fn a_kept_plan_is_dropped_off_its_corridor_for_a_new_goal_and_searched_again_aft
     let (start, end) = sample_pairs(&map, 1, 5, 6.0, "depot").unwrap()[0];
     let mut p = IntentionPlanner::new(Arc::clone(&map), config).unwrap();
     let goals = [Goal::at(end.x_m, end.y_m)];
-    let plan = |p: &mut IntentionPlanner, pose: Pose2D, goals: &[Goal]| match p.answer(
-        &estimate(pose, 0),
-        &GoalProgress::new(goals, 0),
-        false,
-    ) {
-        Answer::Heading { plan, .. } => plan.unwrap(),
-        Answer::Done => panic!("not done at {pose:?}"),
-    };
+    let plan = planned;
     let first = plan(&mut p, start, &goals);
     assert!(!first.reused, "the first answer is a search");
     let on_path = along(&first.path, 0.1);
@@ -392,14 +385,7 @@ fn a_due_search_runs_off_the_pipeline_and_only_refreshes_the_plan_it_was_taken_f
     let mut p = IntentionPlanner::new(Arc::clone(&map), config.clone()).unwrap();
     let mut elsewhere = planning::Planner::new(Arc::clone(&map), config.planner.clone()).unwrap();
     let goals = [Goal::at(end.x_m, end.y_m)];
-    let plan = |p: &mut IntentionPlanner, pose: Pose2D| match p.answer(
-        &estimate(pose, 0),
-        &GoalProgress::new(&goals, 0),
-        false,
-    ) {
-        Answer::Heading { plan, .. } => plan.unwrap(),
-        Answer::Done => panic!("not done at {pose:?}"),
-    };
+    let plan = |p: &mut IntentionPlanner, pose: Pose2D| planned(p, pose, &goals);
     let first = plan(&mut p, start);
     let on_path = along(&first.path, 0.1);
     assert!(plan(&mut p, on_path).reused);
@@ -439,4 +425,12 @@ fn differing_share(a: &image::RgbImage, b: &image::RgbImage) -> f64 {
     assert_eq!(a.dimensions(), b.dimensions());
     let differ = a.pixels().zip(b.pixels()).filter(|(p, q)| p != q).count();
     differ as f64 / f64::from(a.width() * a.height())
+}
+
+/// The pipeline's plan for `pose` heading for the first of `goals`.
+fn planned(p: &mut IntentionPlanner, pose: Pose2D, goals: &[Goal]) -> planning::Planned {
+    match p.answer(&estimate(pose, 0), &GoalProgress::new(goals, 0), false) {
+        Answer::Heading { plan, .. } => plan.unwrap(),
+        Answer::Done => panic!("not done at {pose:?}"),
+    }
 }
