@@ -198,6 +198,10 @@ pub struct TableArgs {
     /// of a new search every cycle: the closed-loop check of issue 16's cheaper replanning.
     #[arg(long)]
     path_reuse: bool,
+    /// Hands each controller's command to the base unchecked, without the agent's collision
+    /// monitor (`[safety.collision_monitor]`): the learned controllers alone, as in the paper.
+    #[arg(long)]
+    no_collision_monitor: bool,
 }
 
 /// Arguments of `eval record`.
@@ -370,7 +374,10 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
     if args.jobs == Some(0) {
         anyhow::bail!("invalid --jobs 0: need at least one job");
     }
-    let agent = read_agent_config(args.config.as_deref())?;
+    let mut agent = read_agent_config(args.config.as_deref())?;
+    if args.no_collision_monitor {
+        agent.safety.collision_monitor.enabled = false;
+    }
     let models_dir = match &args.models {
         Some(dir) => dir.clone(),
         None => {

@@ -8,6 +8,7 @@ pub use protocol::{ControllerKind, UnknownController};
 use protocol::{MapName, Pose2D, SiteId};
 
 use crate::amcl::{AmclConfig, AmclError};
+use crate::collision_monitor::CollisionMonitorConfig;
 use crate::controllers::{DynamicWindowConfig, PathTrackerConfig};
 
 /// Velocity and acceleration limits of the base; network outputs in [-1, 1] scale by these.
@@ -45,6 +46,8 @@ pub struct Safety {
     /// While AMCL relocalizes after losing itself, the robot turns in place at this rate so
     /// that the laser sweeps the surroundings (Nav2's spin recovery); 0 stands still.
     pub relocalize_spin_radps: f64,
+    /// The last check on every command, against the laser scan.
+    pub collision_monitor: CollisionMonitorConfig,
 }
 
 impl Default for Safety {
@@ -54,6 +57,7 @@ impl Default for Safety {
             max_position_std_m: 0.5,
             stop_decel_mps2: 1.0,
             relocalize_spin_radps: 1.0,
+            collision_monitor: CollisionMonitorConfig::default(),
         }
     }
 }
@@ -214,6 +218,7 @@ impl AgentConfig {
                 reason: "must lie between 0 and limits.max_turn_radps",
             });
         }
+        self.safety.collision_monitor.validate()?;
         if self.safety.intention_deadline_ms == 0 {
             return Err(ConfigError::Invalid {
                 field: "safety.intention_deadline_ms",

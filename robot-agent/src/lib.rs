@@ -1,6 +1,7 @@
 //! Robot agent: localization, controllers and the safety loop that commands the base.
 //!
 //! - [`amcl`]: AMCL localization on the floor plan's likelihood field.
+//! - [`collision_monitor`]: the last check on every command, against the laser scan.
 //! - [`controllers`]: the controller trait and the controllers that implement it.
 //! - [`config`]: the agent's configuration.
 //! - [`node`]: the agent node on Zenoh (localization, control and safety loop); [`cli`]: the
@@ -9,12 +10,14 @@
 
 pub mod amcl;
 pub mod cli;
+pub mod collision_monitor;
 pub mod config;
 pub mod controllers;
 pub mod node;
 pub mod replay;
 
 pub use amcl::{Amcl, AmclConfig, Estimate, LikelihoodField, UpdateOutcome};
+pub use collision_monitor::{CollisionMonitorConfig, Verdict};
 pub use config::{AgentConfig, ControllerKind, Limits, Localization, Safety};
 pub use controllers::{Control, ControlInput, Controller, ControllerError};
 pub use node::{make_controller, NodeError, NodeOptions, Supervisor};

@@ -36,6 +36,7 @@ use zenoh::handlers::RingChannel;
 use zenoh::Session;
 
 use crate::amcl::{Amcl, AmclError, LikelihoodField, UpdateOutcome};
+use crate::collision_monitor::{self, Verdict};
 use crate::config::{AgentConfig, ConfigError, ControllerKind, Limits};
 use crate::controllers::{
     Control, ControlInput, Controller, DynamicWindow, IntentionNet, IntentionNetError,
@@ -184,6 +185,9 @@ pub struct Decision {
     pub cmd_omega_radps: f64,
     pub state: AgentState,
     pub stop_reason: Option<StopReason>,
+    /// What the collision monitor did to the command (`None` when the command was to stand or
+    /// turn in place, or the monitor is off).
+    pub collision_monitor: Option<Verdict>,
 }
 
 /// The agent's brain without I/O: localization, the newest inputs, the controller and the
@@ -197,6 +201,8 @@ pub struct Supervisor {
     controller: Box<dyn Controller>,
     odometry: VecDeque<Odometry>,
     scan: Option<LaserScan>,
+    /// What the collision monitor did in this cycle.
+    monitor: Option<Verdict>,
     camera: Option<CameraFrame>,
     intention: Option<Intention>,
     /// (seq, local time) of every published pose still remembered.
@@ -253,6 +259,7 @@ impl Supervisor {
             controller,
             odometry: VecDeque::with_capacity(ODOM_HISTORY),
             scan: None,
+            monitor: None,
             camera: None,
             intention: None,
             poses: VecDeque::with_capacity(POSE_HISTORY),
@@ -437,8 +444,9 @@ impl Supervisor {
         });
         self.last_control = Some(now);
         let limits = self.config.limits;
+        self.monitor = None;
         let (target, state, reason) = self.target(now, dt, &limits);
-        let (v, w) = match target {
+        let (mut v, mut w) = match target {
             // Driving: the controller's command within the acceleration limits.
             Some((v, w)) => (
                 approach(self.cmd_v_mps, v, limits.max_accel_mps2 * dt),
@@ -449,6 +457,18 @@ impl Supervisor {
                 approach(self.cmd_omega_radps, 0.0, limits.max_turn_accel_radps2 * dt),
             ),
         };
+        // The collision monitor comes last, after the acceleration limits, as it sits right
+        // before the base: braking for an obstacle may be harder than the controller's own.
+        // Its scan is never old while driving: poses are published on scans, so without new
+        // ones the intention goes stale within its deadline and the robot stops anyway.
+        let monitor = &self.config.safety.collision_monitor;
+        if let Some(scan) = self.scan.as_ref().filter(|_| monitor.enabled) {
+            if v != 0.0 {
+                let verdict = collision_monitor::check(monitor, scan, v, w);
+                (v, w) = (verdict.v_mps, verdict.omega_radps);
+                self.monitor = Some(verdict);
+            }
+        }
         let state = match state {
             AgentState::Stopping | AgentState::Stopped => {
                 if v == 0.0 && w == 0.0 {
@@ -472,6 +492,7 @@ impl Supervisor {
             cmd_omega_radps: w,
             state,
             stop_reason: reason,
+            collision_monitor: self.monitor,
         }
     }
 

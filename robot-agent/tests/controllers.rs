@@ -16,11 +16,12 @@ use map_core::{CellClass, DistanceField, OccupancyGrid, Sources};
 use protocol::{Dlm, Intention, Pose2D};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use robot_agent::collision_monitor::{self, CollisionMonitorConfig};
 use robot_agent::controllers::{
     Control, ControlInput, Controller, DynamicWindow, DynamicWindowConfig, PathTracker,
     PathTrackerConfig,
 };
-use robot_agent::Limits;
+use robot_agent::{ControllerError, ControllerKind, Limits};
 use test_support::fixtures::{self, map_ref};
 
 /// The Pioneer-sized disc every test robot is.
@@ -325,6 +326,53 @@ fn path_tracker_collides_with_an_unmapped_box_on_its_path() {
         "{hit:?}"
     );
     assert!(!d.reached_goal);
+}
+
+/// A controller whose commands pass the agent's collision monitor, as the supervisor applies
+/// it between any controller and the base.
+struct Monitored<C>(C, CollisionMonitorConfig);
+
+impl<C: Controller> Controller for Monitored<C> {
+    fn kind(&self) -> ControllerKind {
+        self.0.kind()
+    }
+
+    fn control(&mut self, input: &ControlInput<'_>) -> Result<Control, ControllerError> {
+        let (v, w) = self.0.control(input)?.to_physical(input.limits);
+        let verdict = collision_monitor::check(&self.1, input.scan.unwrap(), v, w);
+        Ok(Control {
+            v_norm: verdict.v_mps / input.limits.max_speed_mps,
+            omega_norm: verdict.omega_radps / input.limits.max_turn_radps,
+        })
+    }
+}
+
+#[test]
+fn the_collision_monitor_stops_the_path_tracker_short_of_the_unmapped_box() {
+    // The path tracker that hits the box above, behind the monitor: it slows down and comes to
+    // rest in front of the box, its disc the margin away, and never touches it.
+    let (mut truth, path, start) = depot_with_box_on_path();
+    let monitor = CollisionMonitorConfig::default();
+    let d = drive(
+        &mut truth,
+        &mut Monitored(tracker(), monitor),
+        &path,
+        start,
+        40.0,
+        &mut no_events,
+    );
+    println!("path tracker behind the monitor, box: {}", summary(&d));
+    assert!(d.collision.is_none(), "{}", summary(&d));
+    assert!(!d.reached_goal);
+    // Resting in front of the box (its near face at x = 6.7), at least half the margin away.
+    let gap_m = 6.7 - d.end.x_m - RADIUS_M;
+    assert!(
+        gap_m > 0.5 * monitor.margin_m && gap_m < 0.2,
+        "gap {gap_m:.3} m: {}",
+        summary(&d)
+    );
+    let (_, _, v_end, _) = *d.trace.last().unwrap();
+    assert!(v_end.abs() < 0.02, "still moving at {v_end} m/s");
 }
 
 #[test]

@@ -86,6 +86,9 @@ pub struct Row {
     /// The smallest glass gap over all runs (`None` without glass).
     pub min_glass_distance_m: Option<f64>,
     pub mean_position_error_m: Option<Stat>,
+    /// Share of cycles in which the collision monitor limited the command (`None`: off).
+    #[serde(default)]
+    pub collision_monitor_share: Option<Stat>,
     /// The intention audit summed over the runs that have one.
     #[serde(default)]
     pub intention_audit: Option<IntentionAudit>,
@@ -160,6 +163,7 @@ pub fn rows(runs: &[RunResult]) -> Vec<Row> {
                 min_person_distance_m: min_of(&|r| r.min_person_distance_m),
                 min_glass_distance_m: min_of(&|r| r.min_glass_distance_m),
                 mean_position_error_m: of(&|r| Some(r.mean_position_error_m)),
+                collision_monitor_share: of(&|r| r.collision_monitor_share.map(|s| 100.0 * s)),
                 intention_audit: IntentionAudit::sum(
                     group.iter().filter_map(|r| r.intention_audit.as_ref()),
                 ),
@@ -182,14 +186,15 @@ pub fn markdown(table: &Table) -> String {
         "Seeds {seeds}: mean ± standard deviation over seeds. Success: runs that reached every goal in time \
          (behaviour: did what the scenario expects, without contact). Time over the successful runs. \
          Smoothness: mean |jerk| of the true trajectory, m/s³. Collisions: wall/furniture/glass/person/robot, \
-         summed over seeds. Gaps: smallest over all seeds, robot disc to person disc or glass pane.\n\n\
-         | scenario | method | success | interventions | collisions (w/f/g/p/r) | time (s) | smoothness (m/s³) | goals | path (m) | min person gap (m) | min glass gap (m) | AMCL error (m) |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|\n"
+         summed over seeds. Gaps: smallest over all seeds, robot disc to person disc or glass pane. \
+         Monitor: share of cycles in which the collision monitor slowed the command (– when off).\n\n\
+         | scenario | method | success | interventions | collisions (w/f/g/p/r) | time (s) | smoothness (m/s³) | goals | path (m) | min person gap (m) | min glass gap (m) | AMCL error (m) | monitor (%) |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
     );
     for r in &table.rows {
         let gap = |g: Option<f64>| g.map_or_else(|| "–".to_string(), |g| format!("{g:.2}"));
         out.push_str(&format!(
-            "| {} | {} | {}/{} | {} | {}/{}/{}/{}/{} | {} | {} | {} / {} | {} | {} | {} | {} |\n",
+            "| {} | {} | {}/{} | {} | {}/{}/{}/{}/{} | {} | {} | {} / {} | {} | {} | {} | {} | {} |\n",
             r.scenario,
             r.method,
             r.successes,
@@ -208,6 +213,7 @@ pub fn markdown(table: &Table) -> String {
             gap(r.min_person_distance_m),
             gap(r.min_glass_distance_m),
             Stat::show(r.mean_position_error_m, 3),
+            Stat::show(r.collision_monitor_share, 1),
         ));
     }
     if table.rows.iter().any(|r| r.intention_audit.is_some()) {

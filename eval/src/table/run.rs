@@ -147,6 +147,10 @@ pub struct RunResult {
     pub max_position_error_m: f64,
     pub mean_heading_error_deg: f64,
     pub max_heading_error_deg: f64,
+    /// Share of the cycles in which the collision monitor slowed or stopped the controller's
+    /// command (`None`: the monitor was off).
+    #[serde(default)]
+    pub collision_monitor_share: Option<f64>,
     /// The DLM told against the DLM the true pose would have given (`None`: not audited).
     #[serde(default)]
     pub intention_audit: Option<super::audit::IntentionAudit>,
@@ -355,6 +359,7 @@ pub fn run_with(
         None => None,
     };
     let record_camera = recorder.as_ref().is_some_and(RunRecorder::wants_camera);
+    let monitor_on = agent.safety.collision_monitor.enabled;
     let mut supervisor = Supervisor::new(agent, map, &prepared.plan, controller)
         .map_err(|e| setup("agent")(e.to_string()))?;
     let mut pipeline =
@@ -387,6 +392,7 @@ pub fn run_with(
     let mut min_person: Option<f64> = None;
     let mut min_glass: Option<f64> = None;
     let (mut sum_err, mut max_err, mut cycles) = (0.0f64, 0.0f64, 0u64);
+    let mut monitor_limited = 0u64;
     let (mut sum_yaw_err, mut max_yaw_err) = (0.0f64, 0.0f64);
     let mut path_length_m = 0.0;
     let mut last_truth = start;
@@ -622,6 +628,7 @@ pub fn run_with(
             *truth.lock().unwrap_or_else(PoisonError::into_inner) = TruthView::of(&world, 0);
         }
         let decision = supervisor.control(now);
+        monitor_limited += u64::from(decision.collision_monitor.is_some_and(|v| v.limited()));
         tracing::trace!(
             scenario = %name, %method, seed, t_s,
             x = truth_pose.x_m, y = truth_pose.y_m, yaw = truth_pose.yaw_rad,
@@ -698,6 +705,8 @@ pub fn run_with(
         max_position_error_m: max_err,
         mean_heading_error_deg: sum_yaw_err / n,
         max_heading_error_deg: max_yaw_err,
+        #[allow(clippy::cast_precision_loss)]
+        collision_monitor_share: monitor_on.then(|| monitor_limited as f64 / n),
         intention_audit: truth_pipeline.is_some().then(|| auditor.finish()),
         wall_s: started.elapsed().as_secs_f64(),
     };
