@@ -199,3 +199,29 @@ fn the_glass_door_is_judged_by_contact_and_by_not_reaching_the_goal() {
     let gap = expert.min_glass_distance_m.unwrap();
     assert!(gap > 0.05 && gap < 1.5, "{expert:?}");
 }
+
+#[test]
+fn a_parked_robot_is_passed_by_the_window_and_stops_the_monitored_path_tracker() {
+    use protocol::ControllerKind;
+    let (p, mut options) = prepared("behaviour_robot_parked");
+    assert!(p.is_behaviour());
+    // The dynamic window sees the parked robot with its laser and drives round it.
+    let (dw, _) =
+        eval::table::run_one(&p, ControllerKind::DynamicWindow, 0, &options, |_| {}).unwrap();
+    assert!(dw.success, "{dw:?}");
+    assert_eq!(dw.collisions.total(), 0, "{dw:?}");
+    assert_eq!(dw.goals_reached, 1);
+    // The path tracker follows the plan through it: the collision monitor stops it short,
+    // without contact; without the monitor it runs into the robot, and the judge says so.
+    let (pt, _) =
+        eval::table::run_one(&p, ControllerKind::PathTracker, 0, &options, |_| {}).unwrap();
+    assert!(!pt.success, "{pt:?}");
+    assert_eq!(pt.collisions.total(), 0, "{pt:?}");
+    assert!(pt.collision_monitor_share.unwrap() > 0.5, "{pt:?}");
+    options.agent.safety.collision_monitor.enabled = false;
+    let (blind, _) =
+        eval::table::run_one(&p, ControllerKind::PathTracker, 0, &options, |_| {}).unwrap();
+    assert!(!blind.success, "{blind:?}");
+    assert!(blind.collisions.robot >= 1, "{blind:?}");
+    assert_eq!(blind.collision_monitor_share, None);
+}

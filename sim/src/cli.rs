@@ -138,6 +138,7 @@ pub fn run(cli: Cli) -> Result<()> {
         } => {
             let mut world = World::from_scenario_file(&scenario, load_config(config.as_deref())?)?;
             world.add_robot(protocol::RobotId::new("robot_1")?, pose)?;
+            world.add_parked_robots()?;
             let image = world.render_camera(0)?;
             let img = image::RgbImage::from_raw(image.width_px, image.height_px, image.data)
                 .context("camera image has the wrong size")?;
@@ -198,6 +199,8 @@ pub fn run(cli: Cli) -> Result<()> {
             // Where the robots stand, for whoever starts their agents: the roster, one JSON line
             // on stdout (the launcher reads it with `Roster::parse_line`); logs for people.
             let roster = crate::roster::Roster::of_world(&world);
+            // After the roster: parked robots get no agent, and they stand still.
+            world.add_parked_robots()?;
             for r in &roster.robots {
                 tracing::info!(robot = %r.id, "starts at {:.3},{:.3},{:.4}", r.x_m, r.y_m, r.yaw_rad);
             }

@@ -507,6 +507,7 @@ fn scenario(
         furniture,
         glass,
         people,
+        parked_robots: Vec::new(),
         expect_goals_reached: true,
     }
 }
@@ -854,8 +855,9 @@ fn corridor_look() -> AppearanceSpec {
     }
 }
 
-/// The behaviour checks of the paper's §4.2 on the corridor plan: one situation each, the robot
-/// starting at the west end facing east along the corridor's centre line.
+/// The behaviour checks of the paper's §4.2 on the corridor plan, and a parked robot (which the
+/// fleet demo meets): one situation each, the robot starting at the west end facing east along
+/// the corridor's centre line.
 fn behaviour_scenarios() -> Vec<Scenario> {
     let mid_y = 0.5 * (CORRIDOR_Y0_M + CORRIDOR_Y1_M);
     let behaviour = |name: &'static str,
@@ -916,7 +918,18 @@ fn behaviour_scenarios() -> Vec<Scenario> {
         0.3,
         [40, 120, 60],
     )];
-    vec![glass, oncoming, ahead]
+    // A robot that finished its task stands on the centre line halfway down the corridor, the
+    // way a fleet leaves one where its goal was: the path runs through it (the floor plan does
+    // not show it) and there is room on either side.
+    let mut parked = behaviour(
+        "behaviour_robot_parked",
+        "Behaviour: another robot stands on the robot's path in the corridor; go round it, reach the goal, no contact",
+        304,
+        25.5,
+        90.0,
+    );
+    parked.parked_robots = vec![pose(12.0, mid_y, std::f64::consts::PI)];
+    vec![glass, oncoming, ahead, parked]
 }
 
 /// Every shipped scenario: tasks A–E (evaluation), the training environments and the behaviour

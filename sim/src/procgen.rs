@@ -2547,6 +2547,7 @@ fn attempt_building(seed: u64, rng: &mut ChaCha8Rng) -> Result<Building, Failure
         furniture: extras.furniture,
         glass: extras.glass,
         people,
+        parked_robots: Vec::new(),
         expect_goals_reached: true,
     };
     Ok(Building {

@@ -312,6 +312,10 @@ pub struct Scenario {
     pub glass: Vec<GlassSpec>,
     #[serde(default)]
     pub people: Vec<PersonSpec>,
+    /// Other robots standing still (a robot that finished its task where it stopped): the
+    /// simulator adds them after the robots it drives, and nobody commands them.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub parked_robots: Vec<PoseSpec>,
     /// What a right run does with the goals, so a harness can judge it. `true` (the default):
     /// it reaches every goal in order. `false`: the way to the goals is closed in the ground truth
     /// (e.g. by an unmapped glass door) though open on the plan, and a right run reaches none of
@@ -489,6 +493,11 @@ impl Scenario {
                     format!("pane is {len:.3} m long; need at least 0.1 m"),
                 ));
             }
+        }
+        for (i, r) in self.parked_robots.iter().enumerate() {
+            check_finite(&format!("parked_robots[{i}].x_m"), r.x_m)?;
+            check_finite(&format!("parked_robots[{i}].y_m"), r.y_m)?;
+            check_finite(&format!("parked_robots[{i}].yaw_rad"), r.yaw_rad)?;
         }
         for (i, p) in self.people.iter().enumerate() {
             let f = format!("people[{i}]");

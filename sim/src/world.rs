@@ -453,6 +453,27 @@ impl World {
         Ok(index)
     }
 
+    /// Adds the scenario's parked robots, `parked_1..n`, after the robots already placed (so
+    /// the driven robots keep their indices). Nobody commands them: they stand still.
+    ///
+    /// # Errors
+    /// [`SimError::Blocked`] when a parked robot overlaps something, a driven robot included.
+    pub fn add_parked_robots(&mut self) -> Result<(), SimError> {
+        let poses: Vec<Pose2D> = self
+            .scenario
+            .parked_robots
+            .iter()
+            .map(|p| p.to_pose())
+            .collect();
+        for (k, pose) in poses.into_iter().enumerate() {
+            let id = RobotId::new(format!("parked_{}", k + 1)).map_err(|e| {
+                ScenarioError::invalid("parked_robots", k, format!("not a valid robot id: {e}"))
+            })?;
+            self.add_robot(id, pose)?;
+        }
+        Ok(())
+    }
+
     /// A person carries robot `index` to the true pose `pose` (the evaluation harness's human
     /// intervention): the robot stands still there and its odometry does not see the move, as
     /// the wheels did not turn.

@@ -358,6 +358,7 @@ const AGENT_MAX_SPEED_MPS: f64 = 0.7;
 fn blind_run(path: &Path) -> Option<(Obstacle, f64)> {
     let mut world = World::from_scenario_file(path, SimConfig::default()).unwrap();
     world.add_robots_at_start(1).unwrap();
+    world.add_parked_robots().unwrap();
     let dt_s = 0.05;
     let cmd = [Command {
         v_mps: AGENT_MAX_SPEED_MPS,
@@ -386,7 +387,8 @@ fn behaviour_scenarios_mean_what_they_say() {
         [
             "behaviour_glass_door",
             "behaviour_person_ahead",
-            "behaviour_person_oncoming"
+            "behaviour_person_oncoming",
+            "behaviour_robot_parked"
         ]
     );
     // Only the glass door is there to be stopped at.
@@ -439,4 +441,14 @@ fn behaviour_scenarios_mean_what_they_say() {
     );
     let (hit, _) = blind_run(path).expect("a blind robot must catch up with the person ahead");
     assert_eq!(hit, Obstacle::Person(0));
+
+    // The parked robot: stands on the centre line ahead, with room to pass on either side.
+    let (path, s) = behaviour["behaviour_robot_parked"];
+    assert_eq!(s.parked_robots.len(), 1);
+    assert!(s.people.is_empty() && s.furniture.is_empty() && s.glass.is_empty());
+    let parked = s.parked_robots[0];
+    assert!((parked.y_m - s.start.y_m).abs() < 1e-9 && parked.x_m > s.start.x_m + 5.0);
+    let (hit, _) = blind_run(path).expect("a blind robot must run into the parked robot");
+    // Robot 0 is the driven one; the parked robot comes after it.
+    assert_eq!(hit, Obstacle::Robot(1));
 }

@@ -319,6 +319,7 @@ pub fn run_with(
         .map_err(|e| setup("world")(e.to_string()))?;
     world
         .add_robots_at_start(1)
+        .and_then(|()| world.add_parked_robots())
         .map_err(|e| setup("robot")(e.to_string()))?;
     let start = world
         .ground_truth_pose(0)
