@@ -1,7 +1,9 @@
 //! Time per control step of the dynamic window controller on the Nav2 depot map (181-beam
 //! ray-cast scan with an unmapped box on the path), against references in the same run: the
 //! same controller without the local navigation function (plain Fox), with a denser window
-//! (21 x 41 samples), and the pure-pursuit path tracker.
+//! (21 x 41 samples), and the pure-pursuit path tracker. Then the collision monitor's check of
+//! one command on the same scan (what the agent adds after any controller), against the path
+//! tracker's step.
 //!
 //! Run: `cargo bench -p robot-agent --bench controllers`
 
@@ -17,6 +19,7 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use protocol::{Dlm, Intention, Pose2D};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use robot_agent::collision_monitor::{self, CollisionMonitorConfig};
 use robot_agent::controllers::{
     ControlInput, Controller, DynamicWindow, DynamicWindowConfig, PathTracker, PathTrackerConfig,
 };
@@ -87,6 +90,37 @@ fn bench_step(c: &mut Criterion) {
             b.iter(|| black_box(controller.control(black_box(&input)).expect("control")));
         });
     }
+    group.finish();
+
+    let monitor = CollisionMonitorConfig::default();
+    // 0.8 m before the box's face: at 0.7 m/s the disc would touch it within the horizon.
+    let near = Pose2D::new(5.9, 7.5, 0.0);
+    let near_scan = amcl_world::Laser::default().scan(&truth, &near, 0, &mut rng);
+    assert!(collision_monitor::check(&monitor, &near_scan, 0.7, 0.0).limited());
+    let mut group = c.benchmark_group("collision_monitor");
+    group.sample_size(30);
+    // Straight at the box at full speed: limited, the arc checked again at lower speeds.
+    group.bench_function("check_towards_the_box", |b| {
+        b.iter(|| {
+            black_box(collision_monitor::check(
+                &monitor,
+                black_box(&near_scan),
+                0.7,
+                0.0,
+            ))
+        });
+    });
+    // Slow and turning: nothing within the reach of 1.2 s at 0.3 m/s.
+    group.bench_function("check_nothing_in_reach", |b| {
+        b.iter(|| {
+            black_box(collision_monitor::check(
+                &monitor,
+                black_box(&scan),
+                0.3,
+                1.0,
+            ))
+        });
+    });
     group.finish();
 }
 
