@@ -20,6 +20,7 @@ use protocol::LaserScan;
 
 use crate::config::ConfigError;
 use crate::controllers::dynamic_window::arc_pose;
+use crate::controllers::path_tracker::{check_non_negative, check_positive};
 
 /// The `[safety.collision_monitor]` table.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -55,36 +56,21 @@ impl CollisionMonitorConfig {
     /// # Errors
     /// [`ConfigError::Invalid`] naming the first bad field and its value.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        for (field, v, positive) in [
+        check_positive(&[
             (
                 "safety.collision_monitor.robot_radius_m",
                 self.robot_radius_m,
-                true,
             ),
-            ("safety.collision_monitor.margin_m", self.margin_m, false),
             (
                 "safety.collision_monitor.time_before_collision_s",
                 self.time_before_collision_s,
-                true,
             ),
             (
                 "safety.collision_monitor.simulation_step_s",
                 self.simulation_step_s,
-                true,
             ),
-        ] {
-            if !v.is_finite() || v < 0.0 || (positive && v == 0.0) {
-                return Err(ConfigError::Invalid {
-                    field,
-                    value: v.to_string(),
-                    reason: if positive {
-                        "must be a positive, finite number"
-                    } else {
-                        "must be a finite number >= 0"
-                    },
-                });
-            }
-        }
+        ])?;
+        check_non_negative(&[("safety.collision_monitor.margin_m", self.margin_m)])?;
         if self.simulation_step_s > self.time_before_collision_s {
             return Err(ConfigError::Invalid {
                 field: "safety.collision_monitor.simulation_step_s",
