@@ -21,6 +21,7 @@ use protocol::LaserScan;
 use crate::config::ConfigError;
 use crate::controllers::dynamic_window::arc_pose;
 use crate::controllers::path_tracker::{check_non_negative, check_positive};
+use crate::controllers::scan_points;
 
 /// The `[safety.collision_monitor]` table.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -155,14 +156,7 @@ fn check_arc(
     let horizon_s = config.time_before_collision_s;
     // Points the disc could reach within the horizon at the commanded speed.
     let reach_m = v_mps.abs() * horizon_s + keep_m;
-    let points: Vec<(f64, f64)> = (0..scan.ranges_m.len())
-        .filter(|&i| scan.is_return(i))
-        .filter_map(|i| {
-            let r = f64::from(scan.ranges_m[i]);
-            let a = f64::from(scan.beam_angle_rad(i));
-            (r <= reach_m).then(|| (r * a.cos(), r * a.sin()))
-        })
-        .collect();
+    let points: Vec<(f64, f64)> = scan_points(scan, reach_m).collect();
     if points.is_empty() {
         return pass;
     }

@@ -479,17 +479,8 @@ impl Controller for DynamicWindow {
         // Only points that an arc of the cap's length could come near matter.
         let reach_m = c.clearance_cap_m + inflated_m + 0.1;
         self.points.clear();
-        for (i, &r) in scan.ranges_m.iter().enumerate() {
-            if !scan.is_return(i) {
-                continue;
-            }
-            let r = f64::from(r);
-            if r > reach_m {
-                continue;
-            }
-            let a = f64::from(scan.beam_angle_rad(i));
-            self.points.push([r * a.cos(), r * a.sin()]);
-        }
+        self.points
+            .extend(super::scan_points(scan, reach_m).map(|(x, y)| [x, y]));
         let start_sq = self.nearest_sq(0.0, 0.0);
 
         // The dynamic window, within the limits; no reversing.

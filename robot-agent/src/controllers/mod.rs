@@ -20,6 +20,18 @@ use protocol::{CameraFrame, Intention, LaserScan, Pose2D};
 
 use crate::config::{ControllerKind, Limits};
 
+/// The scan's returns within `reach_m` of the laser as robot-frame points (x forward, y left):
+/// what the dynamic window and the collision monitor check arcs against.
+pub fn scan_points(scan: &LaserScan, reach_m: f64) -> impl Iterator<Item = (f64, f64)> + '_ {
+    (0..scan.ranges_m.len())
+        .filter(|&i| scan.is_return(i))
+        .filter_map(move |i| {
+            let r = f64::from(scan.ranges_m[i]);
+            let a = f64::from(scan.beam_angle_rad(i));
+            (r <= reach_m).then(|| (r * a.cos(), r * a.sin()))
+        })
+}
+
 /// What a controller may look at in one cycle. All poses are in the map frame.
 #[derive(Debug, Clone, Copy)]
 pub struct ControlInput<'a> {
