@@ -17,7 +17,11 @@
 //!   milliseconds) is rare. One much longer than the planner's way round, or none at all (a
 //!   shut glass door closing the only way), is not taken: the expert then follows the
 //!   planner's path, stops short of the obstruction without touching it and waits, as a
-//!   person would at a locked door. Where the planner's path grazes walls or furniture (it
+//!   person would at a locked door. Another robot that has stood still for
+//!   [`ExpertConfig::standing_robot_s`] counts as an obstruction too, like furniture: it may be
+//!   parked, waiting for a task or broken down, and following it at the follow gap (as a
+//!   robot that is only slower is followed) would wait behind it for ever. Where the planner's
+//!   path grazes walls or furniture (it
 //!   only keeps the robot's radius from plan walls), the points just ahead are pushed along
 //!   the clearance gradient towards [`ExpertConfig::comfort_clearance_m`].
 //! - **Giving way.** Someone coming the other way along the reference gets the robot's side
@@ -210,6 +214,9 @@ pub struct ExpertConfig {
     pub detour_extra_m: f64,
     /// Least time between two detour searches.
     pub replan_period_s: f64,
+    /// Another robot that has stood still (below 2 cm/s) this long is an obstruction to go
+    /// round, not a robot to follow.
+    pub standing_robot_s: f64,
     /// The command filter restarts from the measured motion when the robot's speed differs
     /// from the last command by more than this (a carry, a safety stop, another controller).
     pub motion_resync_mps: f64,
@@ -246,6 +253,7 @@ impl Default for ExpertConfig {
             detour_max_ratio: 3.0,
             detour_extra_m: 6.0,
             replan_period_s: 1.0,
+            standing_robot_s: 2.0,
             motion_resync_mps: 0.08,
             motion_resync_radps: 0.25,
         }
@@ -276,6 +284,7 @@ impl ExpertConfig {
             ("block_scan_m", self.block_scan_m),
             ("detour_max_ratio", self.detour_max_ratio),
             ("replan_period_s", self.replan_period_s),
+            ("standing_robot_s", self.standing_robot_s),
             ("motion_resync_mps", self.motion_resync_mps),
             ("motion_resync_radps", self.motion_resync_radps),
         ];
@@ -395,11 +404,19 @@ impl StaticTruth {
             .fold(self.wall_clearance_m(x_m, y_m), f64::min)
     }
 
-    /// Unit direction in which [`Self::clearance_m`] grows fastest (zero where it is flat).
-    fn clearance_gradient(&self, x_m: f64, y_m: f64) -> (f64, f64) {
+    /// As [`Self::clearance_m`], with the `standing` robots as obstacles too.
+    fn clearance_with_m(&self, standing: &[StandingDisc], x_m: f64, y_m: f64) -> f64 {
+        self.clearance_m(x_m, y_m)
+            .min(standing_clearance_m(standing, x_m, y_m))
+    }
+
+    /// Unit direction in which [`Self::clearance_with_m`] grows fastest (zero where it is
+    /// flat).
+    fn clearance_gradient(&self, standing: &[StandingDisc], x_m: f64, y_m: f64) -> (f64, f64) {
         let h = self.geometry.resolution_m();
-        let gx = self.clearance_m(x_m + h, y_m) - self.clearance_m(x_m - h, y_m);
-        let gy = self.clearance_m(x_m, y_m + h) - self.clearance_m(x_m, y_m - h);
+        let clear = |x: f64, y: f64| self.clearance_with_m(standing, x, y);
+        let gx = clear(x_m + h, y_m) - clear(x_m - h, y_m);
+        let gy = clear(x_m, y_m + h) - clear(x_m, y_m - h);
         let n = gx.hypot(gy);
         if n < 1e-9 {
             (0.0, 0.0)
@@ -407,6 +424,31 @@ impl StaticTruth {
             (gx / n, gy / n)
         }
     }
+}
+
+/// Another robot that has stood still long enough to be gone round (see
+/// [`ExpertConfig::standing_robot_s`]), as the obstruction check and the detour search see it:
+/// its disc grown so that keeping the static margin from the grown disc keeps the robot
+/// margin, and a little more, from the robot itself.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct StandingDisc {
+    x_m: f64,
+    y_m: f64,
+    radius_m: f64,
+}
+
+/// Below this speed another robot counts as standing still.
+const STILL_MPS: f64 = 0.02;
+/// Room beyond the robot margin that a detour keeps from a standing robot, so that passing
+/// it does not set off the rollouts' closing-in check.
+const STANDING_EXTRA_M: f64 = 0.1;
+
+/// Distance from (x, y) to the nearest standing robot's grown disc (infinite when none).
+fn standing_clearance_m(standing: &[StandingDisc], x_m: f64, y_m: f64) -> f64 {
+    standing
+        .iter()
+        .map(|d| (d.x_m - x_m).hypot(d.y_m - y_m) - d.radius_m)
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// Most cells one detour search may expand (a bound on its cost, about 10 ms).
@@ -433,12 +475,14 @@ struct Search {
 
 impl Search {
     /// The cheapest 8-connected way (map-frame cell centres) from `start` to `goal` through
-    /// cells whose clearance is at least `min_clear_m`, preferring `PREFERRED_EXTRA_M` more;
-    /// None when there is none within the window and the expansion budget. A start cell below
-    /// the clearance may be left towards more clearance (the robot stands where it stands).
+    /// cells whose clearance (from the ground truth and the `standing` robots) is at least
+    /// `min_clear_m`, preferring `PREFERRED_EXTRA_M` more; None when there is none within the
+    /// window and the expansion budget. A start cell below the clearance may be left towards
+    /// more clearance (the robot stands where it stands).
     fn plan(
         &mut self,
         truth: &StaticTruth,
+        standing: &[StandingDisc],
         start: (f64, f64),
         goal: (f64, f64),
         min_clear_m: f64,
@@ -463,7 +507,16 @@ impl Search {
         let (sx, sy) = geo.world_to_cell(start.0, start.1);
         let (tx, ty) = geo.world_to_cell(goal.0, goal.1);
         let res = geo.resolution_m();
-        let clear = |i: usize| f64::from(truth.all.as_slice()[i]) - truth.slack_m;
+        let wu = usize::try_from(w).ok()?;
+        let clear = |i: usize| {
+            let c = f64::from(truth.all.as_slice()[i]) - truth.slack_m;
+            if standing.is_empty() {
+                return c;
+            }
+            #[allow(clippy::cast_possible_wrap)]
+            let (x, y) = geo.cell_to_world((i % wu) as i64, (i / wu) as i64);
+            c.min(standing_clearance_m(standing, x, y))
+        };
         let si = geo.checked_index(sx, sy)?;
         // The planner's path may graze a wall where it rejoins: aim at the nearest cell
         // nearby that keeps the clearance instead.
@@ -505,7 +558,6 @@ impl Search {
         #[allow(clippy::cast_possible_truncation)]
         self.open.push(MinCost(octile(sx, sy), si as u32));
         let mut expanded = 0u32;
-        let wu = usize::try_from(w).ok()?;
         while let Some(MinCost(_, i)) = self.open.pop() {
             let i = i as usize;
             if self.closed[i] == gen {
@@ -663,6 +715,8 @@ impl FilterLimits {
 #[derive(Debug, Clone, Copy)]
 struct Mover {
     disc: MovingDisc,
+    /// A robot that has stood still long enough to be gone round, not followed.
+    standing: bool,
     /// Centre distance below which closing in is not admissible.
     hard_m: f64,
     /// Centre distance below which rollouts pay.
@@ -784,6 +838,10 @@ pub struct Expert {
     reference: Vec<(f64, f64)>,
     movers: Vec<Mover>,
     near_boxes: Vec<usize>,
+    /// Since when each other robot (by its index in the truth) has stood still.
+    still_since_s: Vec<Option<f64>>,
+    /// The other robots that have stood still for `standing_robot_s` (this cycle).
+    standing: Vec<StandingDisc>,
 }
 
 impl std::fmt::Debug for Expert {
@@ -889,6 +947,8 @@ impl Expert {
             reference: Vec::new(),
             movers: Vec::new(),
             near_boxes: Vec::new(),
+            still_since_s: Vec::new(),
+            standing: Vec::new(),
         })
     }
 
@@ -988,6 +1048,29 @@ impl Expert {
         self.drive(limits, &soft, (0.0, 0.0), dt)
     }
 
+    /// Notes which other robots stand still and since when, and lists those that have stood
+    /// for `standing_robot_s` as obstructions.
+    fn track_standing(&mut self) {
+        let c = &self.config;
+        self.still_since_s.resize(self.view.robots.len(), None);
+        self.standing.clear();
+        let grow_m = self.config.robot_margin_m - self.config.static_margin_m + STANDING_EXTRA_M;
+        for (d, since) in self.view.robots.iter().zip(&mut self.still_since_s) {
+            if d.vx_mps.hypot(d.vy_mps) >= STILL_MPS {
+                *since = None;
+                continue;
+            }
+            let t0 = *since.get_or_insert(self.clock_s);
+            if self.clock_s - t0 >= c.standing_robot_s {
+                self.standing.push(StandingDisc {
+                    x_m: d.x_m,
+                    y_m: d.y_m,
+                    radius_m: d.radius_m + grow_m.max(0.0),
+                });
+            }
+        }
+    }
+
     /// Builds `self.reference` from the planner's path in `self.path`; returns the distance
     /// along it to an obstruction the robot must stop short of, if any.
     fn build_reference(&mut self, pose: Pose2D) -> Option<f64> {
@@ -1012,7 +1095,12 @@ impl Expert {
         }
         let r = self.radius_m;
         let hard = self.config.static_margin_m;
-        let blocked = |x: f64, y: f64| self.statics.box_clearance_m(x, y) - r < hard;
+        let obstruction_clearance_m = |x: f64, y: f64| {
+            self.statics
+                .box_clearance_m(x, y)
+                .min(standing_clearance_m(&self.standing, x, y))
+        };
+        let blocked = |x: f64, y: f64| obstruction_clearance_m(x, y) - r < hard;
         // The first obstructed point within the scan, and where the path is clear again.
         let mut obstruction: Option<f64> = None;
         let mut rejoin: Option<(f64, usize)> = None;
@@ -1041,8 +1129,7 @@ impl Expert {
                     }
                     Some(_) => {
                         // Clear again once it keeps the margin with room to spare for a while.
-                        if self.statics.box_clearance_m(x, y) - r
-                            >= hard + self.config.comfort_clearance_m
+                        if obstruction_clearance_m(x, y) - r >= hard + self.config.comfort_clearance_m
                         {
                             clear_run_m += len / n;
                             if clear_run_m >= 0.6 {
@@ -1085,8 +1172,11 @@ impl Expert {
             if let (true, Some((rejoin_s, idx))) = (due, rejoin) {
                 self.last_search_s = Some(self.clock_s);
                 let goal = ahead[idx];
-                if let Some(points) = self.search.plan(&self.statics, here, goal, r + hard) {
-                    let points = smooth_detour(&self.statics, points, r + hard);
+                if let Some(points) =
+                    self.search
+                        .plan(&self.statics, &self.standing, here, goal, r + hard)
+                {
+                    let points = smooth_detour(&self.statics, &self.standing, points, r + hard);
                     let len = polyline_length(&points);
                     let limit =
                         self.config.detour_max_ratio * rejoin_s + self.config.detour_extra_m;
@@ -1130,8 +1220,8 @@ impl Expert {
         }
     }
 
-    /// Moves the points of the reference's first stretch that run close to walls, furniture or
-    /// glass out along the clearance gradient, where that gains clearance.
+    /// Moves the points of the reference's first stretch that run close to walls, furniture,
+    /// glass or standing robots out along the clearance gradient, where that gains clearance.
     fn push_reference(&mut self) {
         let want = self.radius_m + self.config.static_margin_m + self.config.comfort_clearance_m;
         let mut along = 0.0;
@@ -1143,14 +1233,14 @@ impl Expert {
                 break;
             }
             for _ in 0..3 {
-                let c = self.statics.clearance_m(p.0, p.1);
+                let c = self.statics.clearance_with_m(&self.standing, p.0, p.1);
                 if c >= want {
                     break;
                 }
-                let (gx, gy) = self.statics.clearance_gradient(p.0, p.1);
+                let (gx, gy) = self.statics.clearance_gradient(&self.standing, p.0, p.1);
                 let step = (want - c).min(0.1);
                 let q = (p.0 + gx * step, p.1 + gy * step);
-                if self.statics.clearance_m(q.0, q.1) > c {
+                if self.statics.clearance_with_m(&self.standing, q.0, q.1) > c {
                     p = q;
                 } else {
                     break;
@@ -1252,7 +1342,7 @@ impl Expert {
         }
         // Follow whoever walks ahead in the robot's lane.
         let (sh, ch) = pose.yaw_rad.sin_cos();
-        for m in &self.movers {
+        for m in self.movers.iter().filter(|m| !m.standing) {
             let d = m.disc;
             let (px, py) = to_robot_frame(&pose, (d.x_m, d.y_m));
             let radii = self.radius_m + d.radius_m;
@@ -1636,19 +1726,36 @@ impl Expert {
         let c = &self.config;
         let reach = limits.max_speed_mps * c.horizon_s + self.radius_m;
         self.movers.clear();
-        let people = self.view.people.iter().map(|d| (d, c.people_margin_m));
-        let robots = self.view.robots.iter().map(|d| (d, c.robot_margin_m));
-        for (d, margin) in people.chain(robots) {
+        let people = self
+            .view
+            .people
+            .iter()
+            .map(|d| (d, c.people_margin_m, false));
+        let robots = self.view.robots.iter().enumerate().map(|(i, d)| {
+            let standing = self.still_since_s.get(i).copied().flatten().is_some_and(|t| {
+                self.clock_s - t >= c.standing_robot_s
+            });
+            (d, c.robot_margin_m, standing)
+        });
+        for (d, margin, standing) in people.chain(robots) {
             let dist = (d.x_m - pose.x_m).hypot(d.y_m - pose.y_m);
             let speed = d.vx_mps.hypot(d.vy_mps);
             if dist - d.radius_m > reach + speed * c.horizon_s + c.people_comfort_m {
                 continue;
             }
             let radii = self.radius_m + d.radius_m;
+            // Passing a standing robot close is what a detour round it does: no comfort
+            // distance to pay for beyond the room the detour keeps.
+            let comfort_m = if standing {
+                margin + STANDING_EXTRA_M
+            } else {
+                margin.max(c.people_comfort_m)
+            };
             self.movers.push(Mover {
                 disc: *d,
+                standing,
                 hard_m: radii + margin,
-                soft_m: radii + margin.max(c.people_comfort_m),
+                soft_m: radii + comfort_m,
             });
         }
         self.near_boxes.clear();
@@ -1745,6 +1852,7 @@ impl Expert {
 /// Thins an 8-connected cell path and smooths it where that keeps `min_clear_m`.
 fn smooth_detour(
     statics: &StaticTruth,
+    standing: &[StandingDisc],
     cells: Vec<(f64, f64)>,
     min_clear_m: f64,
 ) -> Vec<(f64, f64)> {
@@ -1762,8 +1870,9 @@ fn smooth_detour(
                 0.25 * a.0 + 0.5 * b.0 + 0.25 * c.0,
                 0.25 * a.1 + 0.5 * b.1 + 0.25 * c.1,
             );
-            let cq = statics.clearance_m(q.0, q.1);
-            if cq >= min_clear_m || cq >= statics.clearance_m(b.0, b.1) {
+            let clear = |p: (f64, f64)| statics.clearance_with_m(standing, p.0, p.1);
+            let cq = clear(q);
+            if cq >= min_clear_m || cq >= clear(b) {
                 pts[i] = q;
             }
         }
@@ -1807,6 +1916,7 @@ impl Controller for Expert {
             self.view.people.clone_from(&view.people);
             self.view.robots.clone_from(&view.robots);
         }
+        self.track_standing();
         let pose = self.view.pose;
         if !(pose.x_m.is_finite() && pose.y_m.is_finite() && pose.yaw_rad.is_finite()) {
             return Err(ControllerError::BadInput {
@@ -1894,5 +2004,7 @@ impl Controller for Expert {
         self.detour = None;
         self.last_search_s = None;
         self.last_pose = None;
+        self.still_since_s.clear();
+        self.standing.clear();
     }
 }

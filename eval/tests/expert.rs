@@ -26,6 +26,8 @@ struct Run {
     min_person_gap_m: f64,
     /// Smallest gap between the robot's disc and any piece of glass or furniture.
     min_box_gap_m: f64,
+    /// Smallest gap between the robot's disc and another robot's.
+    min_robot_gap_m: f64,
     /// Longest time the robot went without moving 0.5 m.
     longest_still_s: f64,
     /// Whether the expert ever followed a detour of its own.
@@ -58,6 +60,7 @@ fn run(name: &str, scenario: Scenario, max_s: f64) -> Run {
         .collect();
     let mut world = World::new(scenario, plan.clone(), SimConfig::default()).unwrap();
     world.add_robots_at_start(1).unwrap();
+    world.add_parked_robots().unwrap();
     let radius_m = world.config.base.radius_m;
     let truth: SharedTruth = Arc::new(Mutex::new(TruthView::of(&world, 0)));
     let mut expert = Expert::new(&world, ExpertConfig::default(), Arc::clone(&truth)).unwrap();
@@ -76,6 +79,7 @@ fn run(name: &str, scenario: Scenario, max_s: f64) -> Run {
         goals_reached: 0,
         min_person_gap_m: f64::INFINITY,
         min_box_gap_m: f64::INFINITY,
+        min_robot_gap_m: f64::INFINITY,
         longest_still_s: 0.0,
         detoured: false,
         trajectory: Vec::new(),
@@ -98,6 +102,10 @@ fn run(name: &str, scenario: Scenario, max_s: f64) -> Run {
         for p in &world.people {
             let gap = (p.x_m - pose.x_m).hypot(p.y_m - pose.y_m) - p.radius_m - radius_m;
             out.min_person_gap_m = out.min_person_gap_m.min(gap);
+        }
+        for j in 1..world.robot_count() {
+            let q = world.ground_truth_pose(j).unwrap();
+            out.min_robot_gap_m = out.min_robot_gap_m.min(pose.distance_m(&q) - 2.0 * radius_m);
         }
         let boxes = world.furniture.iter().map(|f| f.shape);
         for b in boxes.chain(world.glass.iter().map(|g| g.shape)) {
@@ -215,6 +223,25 @@ fn drives_round_furniture_standing_on_the_planned_path() {
         "{}",
         r.min_box_gap_m
     );
+}
+
+#[test]
+fn drives_round_a_robot_standing_on_the_planned_path() {
+    // Following a robot that never moves on would wait behind it for ever.
+    let scenario = load("behaviour_robot_parked");
+    let parked = scenario.parked_robots[0];
+    let r = run("behaviour_robot_parked", scenario, 90.0);
+    assert!(r.collisions.is_empty(), "{:?}", r.collisions);
+    assert_eq!(r.goals_reached, 1, "end {:?}", r.trajectory.last());
+    assert!(r.detoured, "the planner's path runs through the parked robot");
+    assert!(
+        r.min_robot_gap_m >= ExpertConfig::default().robot_margin_m,
+        "{}",
+        r.min_robot_gap_m
+    );
+    // It waited no longer than it takes to see that the robot stands.
+    assert!(r.longest_still_s < 10.0, "{}", r.longest_still_s);
+    assert!(r.trajectory.iter().any(|p| p.x_m > parked.x_m + 1.0));
 }
 
 #[test]
