@@ -17,6 +17,10 @@
 //!   ahead, where the passage is at most 3 m wide. The floor plan does not have it; the
 //!   expert stops short of it and waits until the judge's intervention carries the robot
 //!   past, as a person would at a locked door.
+//! - [`Encounter::RobotParked`]: another robot standing on the path 4–12 m ahead, up to 0.3 m
+//!   off its centre line, facing any way, where the passage is wide enough to go round it
+//!   (about 2 m). A robot waiting for a task or broken down stands like this in a real
+//!   fleet; the expert goes round it once it has stood for a moment.
 //!
 //! Everything is drawn from the episode's seed; an encounter that does not fit (a path too
 //! short, a person route through furniture, no walls near enough for a door) is left out.
@@ -30,7 +34,7 @@ use rand::seq::SliceRandom;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
-use sim::scenario::{GlassSpec, PersonSpec, PointSpec, RouteMode};
+use sim::scenario::{GlassSpec, PersonSpec, PointSpec, PoseSpec, RouteMode};
 use sim::{Scenario, World};
 
 /// One scripted situation on the robot's route.
@@ -40,13 +44,15 @@ pub enum Encounter {
     PersonAhead,
     PersonOncoming,
     GlassDoor,
+    RobotParked,
 }
 
 impl Encounter {
-    pub const ALL: [Encounter; 3] = [
+    pub const ALL: [Encounter; 4] = [
         Encounter::PersonAhead,
         Encounter::PersonOncoming,
         Encounter::GlassDoor,
+        Encounter::RobotParked,
     ];
 
     #[must_use]
@@ -55,6 +61,7 @@ impl Encounter {
             Encounter::PersonAhead => "person_ahead",
             Encounter::PersonOncoming => "person_oncoming",
             Encounter::GlassDoor => "glass_door",
+            Encounter::RobotParked => "robot_parked",
         }
     }
 }
@@ -69,6 +76,14 @@ const ROUTE_STEP_M: f64 = 1.0;
 /// pass each other (a passage about 1.4 m wide; in narrower ones each would wait for the
 /// other).
 const PASSING_CLEARANCE_M: f64 = 0.7;
+/// Clearance from the floor plan's walls along the path where a parked robot can be gone
+/// round (a passage about 2 m wide).
+const PARKED_CLEARANCE_M: f64 = 1.0;
+/// Furthest a parked robot stands off the path's centre line.
+const PARKED_OFFSET_M: f64 = 0.3;
+/// Free space a parked robot keeps from walls, furniture, glass, the start and the goal.
+const PARKED_CLEARANCE_FROM_M: f64 = 0.3;
+
 /// Widest passage a glass door closes.
 const DOOR_MAX_WIDTH_M: f64 = 3.0;
 
@@ -221,14 +236,29 @@ pub fn add(
     goal: (f64, f64),
     rng: &mut ChaCha8Rng,
 ) -> Option<Encounter> {
+    let mut kinds = Encounter::ALL;
+    kinds.shuffle(rng);
+    add_first_fitting(scenario, planning, planner, world, start, goal, &kinds, rng)
+}
+
+/// As [`add`], trying only `kinds`, in their order.
+#[allow(clippy::too_many_arguments)]
+pub fn add_first_fitting(
+    scenario: &mut Scenario,
+    planning: &Arc<PlanningMap>,
+    planner: &PlannerConfig,
+    world: &World,
+    start: Pose2D,
+    goal: (f64, f64),
+    kinds: &[Encounter],
+    rng: &mut ChaCha8Rng,
+) -> Option<Encounter> {
     let mut planner = Planner::new(Arc::clone(planning), planner.clone()).ok()?;
     let path = planner
         .plan(start, Goal::at(goal.0, goal.1).pose_from(start))
         .ok()?;
     let route = Route::of(&path.poses);
-    let mut kinds = Encounter::ALL;
-    kinds.shuffle(rng);
-    for kind in kinds {
+    for &kind in kinds {
         for _ in 0..DRAWS_PER_KIND {
             if place(kind, scenario, planning, world, start, goal, &route, rng).is_some() {
                 return Some(kind);
@@ -306,6 +336,41 @@ fn place(
                 return None;
             }
             scenario.glass.push(pane);
+        }
+        Encounter::RobotParked => {
+            if length_m < 8.0 {
+                return None;
+            }
+            let wide_m = route.wide_until(planning, PARKED_CLEARANCE_M);
+            let s = rng
+                .gen_range(4.0..12.0_f64)
+                .min(length_m - 3.0)
+                .min(wide_m - 1.5);
+            if s < 4.0 {
+                return None;
+            }
+            let (x, y, heading) = route.at(s);
+            let left_m = rng.gen_range(-PARKED_OFFSET_M..PARKED_OFFSET_M);
+            let (x, y) = (
+                round_cm(x - left_m * heading.sin()),
+                round_cm(y + left_m * heading.cos()),
+            );
+            let r = world.config.base.radius_m;
+            let away = 2.0 * r + PARKED_CLEARANCE_FROM_M;
+            if world
+                .disc_overlap(x, y, r + PARKED_CLEARANCE_FROM_M, None, false)
+                .is_some()
+                || (x - start.x_m).hypot(y - start.y_m) < away
+                || (x - goal.0).hypot(y - goal.1) < away
+            {
+                return None;
+            }
+            let yaw_rad: f64 = rng.gen_range(-std::f64::consts::PI..std::f64::consts::PI);
+            scenario.parked_robots.push(PoseSpec {
+                x_m: x,
+                y_m: y,
+                yaw_rad: (yaw_rad * 100.0).round() / 100.0,
+            });
         }
     }
     Some(())
