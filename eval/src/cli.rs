@@ -202,6 +202,10 @@ pub struct TableArgs {
     /// monitor (`[safety.collision_monitor]`): the learned controllers alone, as in the paper.
     #[arg(long)]
     no_collision_monitor: bool,
+    /// Never lets the dynamic window relieve a controller the collision monitor holds
+    /// (`[safety.recovery]`): the controller alone.
+    #[arg(long)]
+    no_recovery: bool,
 }
 
 /// Arguments of `eval record`.
@@ -377,6 +381,9 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
     let mut agent = read_agent_config(args.config.as_deref())?;
     if args.no_collision_monitor {
         agent.safety.collision_monitor.enabled = false;
+    }
+    if args.no_recovery {
+        agent.safety.recovery.enabled = false;
     }
     let models_dir = match &args.models {
         Some(dir) => dir.clone(),

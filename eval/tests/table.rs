@@ -201,7 +201,7 @@ fn the_glass_door_is_judged_by_contact_and_by_not_reaching_the_goal() {
 }
 
 #[test]
-fn a_parked_robot_is_passed_by_the_window_and_stops_the_monitored_path_tracker() {
+fn a_parked_robot_is_passed_by_the_window_and_by_the_path_tracker_only_with_recovery() {
     use protocol::ControllerKind;
     let (p, mut options) = prepared("behaviour_robot_parked");
     assert!(p.is_behaviour());
@@ -211,13 +211,26 @@ fn a_parked_robot_is_passed_by_the_window_and_stops_the_monitored_path_tracker()
     assert!(dw.success, "{dw:?}");
     assert_eq!(dw.collisions.total(), 0, "{dw:?}");
     assert_eq!(dw.goals_reached, 1);
-    // The path tracker follows the plan through it: the collision monitor stops it short,
-    // without contact; without the monitor it runs into the robot, and the judge says so.
+    assert_eq!(dw.recoveries, None, "the window is not relieved by itself");
+    // The path tracker follows the plan through it. The collision monitor holds it short;
+    // the recovery then hands over to the dynamic window, which goes round, and back.
     let (pt, _) =
         eval::table::run_one(&p, ControllerKind::PathTracker, 0, &options, |_| {}).unwrap();
-    assert!(!pt.success, "{pt:?}");
+    assert!(pt.success, "{pt:?}");
     assert_eq!(pt.collisions.total(), 0, "{pt:?}");
-    assert!(pt.collision_monitor_share.unwrap() > 0.5, "{pt:?}");
+    assert_eq!(pt.interventions, 0, "{pt:?}");
+    assert!(pt.recoveries.unwrap() >= 1, "{pt:?}");
+    let share = pt.recovery_share.unwrap();
+    assert!(share > 0.0 && share < 0.5, "{pt:?}");
+    // Without the recovery the monitor keeps it there, without contact ...
+    options.agent.safety.recovery.enabled = false;
+    let (held, _) =
+        eval::table::run_one(&p, ControllerKind::PathTracker, 0, &options, |_| {}).unwrap();
+    assert!(!held.success, "{held:?}");
+    assert_eq!(held.collisions.total(), 0, "{held:?}");
+    assert!(held.collision_monitor_share.unwrap() > 0.5, "{held:?}");
+    assert_eq!(held.recoveries, None);
+    // ... and without the monitor it runs into the robot, and the judge says so.
     options.agent.safety.collision_monitor.enabled = false;
     let (blind, _) =
         eval::table::run_one(&p, ControllerKind::PathTracker, 0, &options, |_| {}).unwrap();

@@ -9,6 +9,7 @@ use protocol::{MapName, Pose2D, SiteId};
 
 use crate::amcl::{AmclConfig, AmclError};
 use crate::collision_monitor::CollisionMonitorConfig;
+use crate::recovery::RecoveryConfig;
 use crate::controllers::{DynamicWindowConfig, PathTrackerConfig};
 
 /// Velocity and acceleration limits of the base; network outputs in [-1, 1] scale by these.
@@ -48,6 +49,8 @@ pub struct Safety {
     pub relocalize_spin_radps: f64,
     /// The last check on every command, against the laser scan.
     pub collision_monitor: CollisionMonitorConfig,
+    /// The dynamic window takes over while the monitor keeps the controller from moving on.
+    pub recovery: RecoveryConfig,
 }
 
 impl Default for Safety {
@@ -58,6 +61,7 @@ impl Default for Safety {
             stop_decel_mps2: 1.0,
             relocalize_spin_radps: 1.0,
             collision_monitor: CollisionMonitorConfig::default(),
+            recovery: RecoveryConfig::default(),
         }
     }
 }
@@ -219,6 +223,7 @@ impl AgentConfig {
             });
         }
         self.safety.collision_monitor.validate()?;
+        self.safety.recovery.validate()?;
         if self.safety.intention_deadline_ms == 0 {
             return Err(ConfigError::Invalid {
                 field: "safety.intention_deadline_ms",

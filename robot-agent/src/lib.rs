@@ -2,6 +2,7 @@
 //!
 //! - [`amcl`]: AMCL localization on the floor plan's likelihood field.
 //! - [`collision_monitor`]: the last check on every command, against the laser scan.
+//! - [`recovery`]: the dynamic window takes over while the monitor holds the controller.
 //! - [`controllers`]: the controller trait and the controllers that implement it.
 //! - [`config`]: the agent's configuration.
 //! - [`node`]: the agent node on Zenoh (localization, control and safety loop); [`cli`]: the
@@ -14,6 +15,7 @@ pub mod collision_monitor;
 pub mod config;
 pub mod controllers;
 pub mod node;
+pub mod recovery;
 pub mod replay;
 
 pub use amcl::{Amcl, AmclConfig, Estimate, LikelihoodField, UpdateOutcome};
@@ -21,3 +23,4 @@ pub use collision_monitor::{CollisionMonitorConfig, Verdict};
 pub use config::{AgentConfig, ControllerKind, Limits, Localization, Safety};
 pub use controllers::{Control, ControlInput, Controller, ControllerError};
 pub use node::{make_controller, NodeError, NodeOptions, Supervisor};
+pub use recovery::{Recovery, RecoveryConfig};

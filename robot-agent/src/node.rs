@@ -37,6 +37,7 @@ use zenoh::Session;
 
 use crate::amcl::{Amcl, AmclError, LikelihoodField, UpdateOutcome};
 use crate::collision_monitor::{self, Verdict};
+use crate::recovery::{Mode, Recovery};
 use crate::config::{AgentConfig, ConfigError, ControllerKind, Limits};
 use crate::controllers::{
     Control, ControlInput, Controller, DynamicWindow, IntentionNet, IntentionNetError,
@@ -188,6 +189,9 @@ pub struct Decision {
     /// What the collision monitor did to the command (`None` when the command was to stand or
     /// turn in place, or the monitor is off).
     pub collision_monitor: Option<Verdict>,
+    /// The dynamic window drove this cycle in place of the configured controller, which the
+    /// collision monitor had held in front of an obstacle ([`crate::recovery`]).
+    pub recovering: bool,
 }
 
 /// The agent's brain without I/O: localization, the newest inputs, the controller and the
@@ -199,6 +203,14 @@ pub struct Supervisor {
     /// What AMCL did with the last scan (diagnostics, replay timing).
     last_amcl: Option<UpdateOutcome>,
     controller: Box<dyn Controller>,
+    /// The dynamic window that relieves `controller` when it is stuck (none when recovery is
+    /// off or the controller is the dynamic window itself).
+    fallback: Option<Box<dyn Controller>>,
+    recovery: Recovery,
+    /// What the collision monitor did to the last command.
+    last_verdict: Option<Verdict>,
+    /// Whether the fallback drove the last cycle.
+    recovering: bool,
     odometry: VecDeque<Odometry>,
     scan: Option<LaserScan>,
     /// What the collision monitor did in this cycle.
@@ -251,12 +263,28 @@ impl Supervisor {
             Some(pose) => amcl.set_initial_pose(pose, config.localization.initial_covariance())?,
             None => amcl.global_localization()?,
         }
+        // The expert reads the ground truth and goes round things itself.
+        let relieved = !matches!(
+            controller.kind(),
+            ControllerKind::DynamicWindow | ControllerKind::Expert
+        );
+        let fallback: Option<Box<dyn Controller>> =
+            if config.safety.recovery.enabled && relieved {
+                Some(Box::new(DynamicWindow::new(config.dynamic_window)?))
+            } else {
+                None
+            };
+        let recovery = Recovery::new(config.safety.recovery);
         Ok(Self {
             config,
             map,
             amcl,
             last_amcl: None,
             controller,
+            fallback,
+            recovery,
+            last_verdict: None,
+            recovering: false,
             odometry: VecDeque::with_capacity(ODOM_HISTORY),
             scan: None,
             monitor: None,
@@ -328,7 +356,8 @@ impl Supervisor {
     pub fn set_pose(&mut self, pose: Pose2D, covariance: [f64; 9]) -> Result<(), NodeError> {
         self.amcl.set_initial_pose(pose, covariance)?;
         self.intention = None;
-        self.controller.reset();
+        self.reset_controllers();
+        self.recovery.idle(0.0);
         Ok(())
     }
 
@@ -469,6 +498,7 @@ impl Supervisor {
                 self.monitor = Some(verdict);
             }
         }
+        self.last_verdict = self.monitor;
         let state = match state {
             AgentState::Stopping | AgentState::Stopped => {
                 if v == 0.0 && w == 0.0 {
@@ -479,10 +509,14 @@ impl Supervisor {
             }
             other => other,
         };
-        if self.state == AgentState::Driving && state != AgentState::Driving {
-            // A stop ends the controller's episode; it starts afresh when driving resumes.
-            self.controller.reset();
+        if state != AgentState::Driving {
+            self.recovery.idle(dt);
+            if self.state == AgentState::Driving {
+                // A stop ends the controller's episode; it starts afresh when driving resumes.
+                self.reset_controllers();
+            }
         }
+        let recovering = self.recovering && state == AgentState::Driving;
         self.cmd_v_mps = v;
         self.cmd_omega_radps = w;
         self.state = state;
@@ -493,6 +527,38 @@ impl Supervisor {
             state,
             stop_reason: reason,
             collision_monitor: self.monitor,
+            recovering,
+        }
+    }
+
+    fn reset_controllers(&mut self) {
+        self.controller.reset();
+        if let Some(f) = &mut self.fallback {
+            f.reset();
+        }
+        self.recovering = false;
+    }
+
+    /// Whether a stuck controller is relieved by the dynamic window (`[safety.recovery]` on
+    /// and the controller is neither the dynamic window nor the expert).
+    #[must_use]
+    pub fn recovers(&self) -> bool {
+        self.fallback.is_some()
+    }
+
+    /// How many times the dynamic window has taken over from the configured controller.
+    #[must_use]
+    pub fn recoveries(&self) -> u32 {
+        self.recovery.recoveries()
+    }
+
+    /// The controller that drives now: the configured one, or the dynamic window recovering.
+    #[must_use]
+    pub fn active_controller(&self) -> ControllerKind {
+        if self.recovering {
+            ControllerKind::DynamicWindow
+        } else {
+            self.config.controller
         }
     }
 
@@ -551,7 +617,22 @@ impl Supervisor {
             limits,
             dt_s: dt,
         };
-        match self.controller.control(&input) {
+        let mode = if self.fallback.is_some() {
+            self.recovery.drive(dt, pose, self.last_verdict)
+        } else {
+            Mode::Primary
+        };
+        let recovering = mode == Mode::Fallback;
+        let controller = match (&mut self.fallback, recovering) {
+            (Some(fallback), true) => fallback,
+            _ => &mut self.controller,
+        };
+        if recovering != self.recovering {
+            // Each takes the robot over where the other left it.
+            controller.reset();
+            self.recovering = recovering;
+        }
+        match controller.control(&input) {
             Ok(control) => {
                 let (v, w) = Control::clamped(control).to_physical(limits);
                 (Some((v, w)), AgentState::Driving, None)
@@ -569,7 +650,7 @@ impl Supervisor {
             header: Header::new(seq, stamp_ns),
             state: self.state,
             stop_reason: self.stop_reason.clone(),
-            controller: self.config.controller,
+            controller: self.active_controller(),
             map: Some(self.map.clone()),
             localized: self.localized(),
         }

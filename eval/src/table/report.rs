@@ -89,6 +89,12 @@ pub struct Row {
     /// Share of cycles in which the collision monitor limited the command (`None`: off).
     #[serde(default)]
     pub collision_monitor_share: Option<Stat>,
+    /// Share of cycles the dynamic window drove recovering (`None`: no recovery).
+    #[serde(default)]
+    pub recovery_share: Option<Stat>,
+    /// Recoveries per run (`None`: no recovery).
+    #[serde(default)]
+    pub recoveries: Option<Stat>,
     /// The intention audit summed over the runs that have one.
     #[serde(default)]
     pub intention_audit: Option<IntentionAudit>,
@@ -164,6 +170,8 @@ pub fn rows(runs: &[RunResult]) -> Vec<Row> {
                 min_glass_distance_m: min_of(&|r| r.min_glass_distance_m),
                 mean_position_error_m: of(&|r| Some(r.mean_position_error_m)),
                 collision_monitor_share: of(&|r| r.collision_monitor_share.map(|s| 100.0 * s)),
+                recovery_share: of(&|r| r.recovery_share.map(|s| 100.0 * s)),
+                recoveries: of(&|r| r.recoveries.map(f64::from)),
                 intention_audit: IntentionAudit::sum(
                     group.iter().filter_map(|r| r.intention_audit.as_ref()),
                 ),
@@ -187,14 +195,16 @@ pub fn markdown(table: &Table) -> String {
          (behaviour: did what the scenario expects, without contact). Time over the successful runs. \
          Smoothness: mean |jerk| of the true trajectory, m/s³. Collisions: wall/furniture/glass/person/robot, \
          summed over seeds. Gaps: smallest over all seeds, robot disc to person disc or glass pane. \
-         Monitor: share of cycles in which the collision monitor slowed the command (– when off).\n\n\
-         | scenario | method | success | interventions | collisions (w/f/g/p/r) | time (s) | smoothness (m/s³) | goals | path (m) | min person gap (m) | min glass gap (m) | AMCL error (m) | monitor (%) |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
+         Monitor: share of cycles in which the collision monitor slowed the command (– when off). \
+         Recovery: times per run the dynamic window took over from a controller the monitor held, and \
+         the share of cycles it drove (– when off or for the dynamic window itself).\n\n\
+         | scenario | method | success | interventions | collisions (w/f/g/p/r) | time (s) | smoothness (m/s³) | goals | path (m) | min person gap (m) | min glass gap (m) | AMCL error (m) | monitor (%) | recoveries | recovery (%) |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
     );
     for r in &table.rows {
         let gap = |g: Option<f64>| g.map_or_else(|| "–".to_string(), |g| format!("{g:.2}"));
         out.push_str(&format!(
-            "| {} | {} | {}/{} | {} | {}/{}/{}/{}/{} | {} | {} | {} / {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {} | {}/{} | {} | {}/{}/{}/{}/{} | {} | {} | {} / {} | {} | {} | {} | {} | {} | {} | {} |\n",
             r.scenario,
             r.method,
             r.successes,
@@ -214,6 +224,8 @@ pub fn markdown(table: &Table) -> String {
             gap(r.min_glass_distance_m),
             Stat::show(r.mean_position_error_m, 3),
             Stat::show(r.collision_monitor_share, 1),
+            Stat::show(r.recoveries, 1),
+            Stat::show(r.recovery_share, 1),
         ));
     }
     if table.rows.iter().any(|r| r.intention_audit.is_some()) {

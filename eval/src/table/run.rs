@@ -151,6 +151,13 @@ pub struct RunResult {
     /// command (`None`: the monitor was off).
     #[serde(default)]
     pub collision_monitor_share: Option<f64>,
+    /// Share of the cycles in which the dynamic window drove in place of a controller the
+    /// monitor held (`[safety.recovery]`; `None`: no recovery for this method).
+    #[serde(default)]
+    pub recovery_share: Option<f64>,
+    /// How many times the dynamic window took over (`None` as for `recovery_share`).
+    #[serde(default)]
+    pub recoveries: Option<u32>,
     /// The DLM told against the DLM the true pose would have given (`None`: not audited).
     #[serde(default)]
     pub intention_audit: Option<super::audit::IntentionAudit>,
@@ -394,6 +401,7 @@ pub fn run_with(
     let mut min_glass: Option<f64> = None;
     let (mut sum_err, mut max_err, mut cycles) = (0.0f64, 0.0f64, 0u64);
     let mut monitor_limited = 0u64;
+    let mut recovering_cycles = 0u64;
     let (mut sum_yaw_err, mut max_yaw_err) = (0.0f64, 0.0f64);
     let mut path_length_m = 0.0;
     let mut last_truth = start;
@@ -630,11 +638,14 @@ pub fn run_with(
         }
         let decision = supervisor.control(now);
         monitor_limited += u64::from(decision.collision_monitor.is_some_and(|v| v.limited()));
+        recovering_cycles += u64::from(decision.recovering);
         tracing::trace!(
             scenario = %name, %method, seed, t_s,
             x = truth_pose.x_m, y = truth_pose.y_m, yaw = truth_pose.yaw_rad,
             v = decision.cmd_v_mps, w = decision.cmd_omega_radps,
             state = ?decision.state, goal_index, remaining,
+            monitor_scale = decision.collision_monitor.map(|m| m.scale),
+            recovering = decision.recovering,
             "cycle"
         );
         cmd = Command {
@@ -708,6 +719,11 @@ pub fn run_with(
         max_heading_error_deg: max_yaw_err,
         #[allow(clippy::cast_precision_loss)]
         collision_monitor_share: monitor_on.then(|| monitor_limited as f64 / n),
+        #[allow(clippy::cast_precision_loss)]
+        recovery_share: supervisor
+            .recovers()
+            .then(|| recovering_cycles as f64 / n),
+        recoveries: supervisor.recovers().then(|| supervisor.recoveries()),
         intention_audit: truth_pipeline.is_some().then(|| auditor.finish()),
         wall_s: started.elapsed().as_secs_f64(),
     };

@@ -1,0 +1,292 @@
+//! Recovery: when the collision monitor keeps holding the driving controller in front of
+//! something the laser sees, the dynamic window drives for a while (Nav2's progress checker and
+//! recovery behaviours, with the local planner as the recovery).
+//!
+//! A learned controller that has never seen a cabinet, or another robot standing in a corridor,
+//! may keep steering into it; the collision monitor then stops it short, safely, for ever. A
+//! robot that waits in front of a parked robot for minutes is what an operator calls stuck.
+//! The dynamic window plans round what the laser sees, so it is the recovery: it takes over
+//! until the robot has made [`RecoveryConfig::release_m`] of headway (or for at most
+//! [`RecoveryConfig::max_s`]), and the driving controller takes the robot on from there.
+//!
+//! Only the monitor holding the robot back counts (slowing the command below
+//! [`RecoveryConfig::held_speed_mps`] for [`RecoveryConfig::stall_s`]), not standing still: a controller that stops by itself (before
+//! a glass door the laser cannot see) means to, and the dynamic window, blind to glass, would
+//! drive on into the door. The hand-over comes early, while the monitor is still slowing the
+//! robot down on its way to the obstacle, not once it has stopped: held at the monitor's own
+//! small margin, the robot is inside the dynamic window's larger clearance, where every way
+//! round first comes closer, and the window creeps or stays put. Measured with the path
+//! tracker on `behaviour_robot_parked`: when the hand-over waited for the robot to stand, the
+//! window drove 67 % of the 90 s run and never got past the parked robot; handing over below
+//! 0.5 m/s, it drove 24 % and the robot was through in 43 s.
+//!
+//! Plain data in (cycle length, pose, what the monitor did to the last command), the mode out;
+//! the [`Supervisor`](crate::Supervisor) switches controllers by it.
+
+use protocol::Pose2D;
+
+use crate::collision_monitor::Verdict;
+use crate::config::ConfigError;
+use crate::controllers::path_tracker::check_positive;
+
+/// The `[safety.recovery]` table.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RecoveryConfig {
+    /// Off: the driving controller is never relieved (the paper's setting).
+    pub enabled: bool,
+    /// A cycle counts as held when the collision monitor slowed the command to below this ...
+    pub held_speed_mps: f64,
+    /// ... and the dynamic window takes over once the robot has been held this long (held
+    /// cycles add their length, free ones take it off again).
+    pub stall_s: f64,
+    /// The dynamic window hands back once the robot is this far from where it took over ...
+    pub release_m: f64,
+    /// ... or after this long, whichever comes first.
+    pub max_s: f64,
+}
+
+impl Default for RecoveryConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            held_speed_mps: 0.5,
+            stall_s: 1.0,
+            release_m: 1.5,
+            max_s: 12.0,
+        }
+    }
+}
+
+impl RecoveryConfig {
+    /// Checks ranges that serde cannot express.
+    ///
+    /// # Errors
+    /// [`ConfigError::Invalid`] naming the first bad field and its value.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        check_positive(&[
+            ("safety.recovery.held_speed_mps", self.held_speed_mps),
+            ("safety.recovery.stall_s", self.stall_s),
+            ("safety.recovery.release_m", self.release_m),
+            ("safety.recovery.max_s", self.max_s),
+        ])
+    }
+}
+
+/// Which controller drives this cycle.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    /// The configured controller.
+    Primary,
+    /// The dynamic window, recovering.
+    Fallback,
+}
+
+/// The hold timer and the recovery's state (see the module docs).
+#[derive(Debug, Clone)]
+pub struct Recovery {
+    config: RecoveryConfig,
+    clock_s: f64,
+    /// How long the robot has been held, net of the free cycles since.
+    held_s: f64,
+    /// Where and when the dynamic window took over, while it drives.
+    fallback_since: Option<(Pose2D, f64)>,
+    /// How many times the dynamic window took over.
+    recoveries: u32,
+}
+
+impl Recovery {
+    #[must_use]
+    pub fn new(config: RecoveryConfig) -> Self {
+        Self {
+            config,
+            clock_s: 0.0,
+            held_s: 0.0,
+            fallback_since: None,
+            recoveries: 0,
+        }
+    }
+
+    /// How many times the dynamic window took over so far.
+    #[must_use]
+    pub fn recoveries(&self) -> u32 {
+        self.recoveries
+    }
+
+    #[must_use]
+    pub fn mode(&self) -> Mode {
+        if self.fallback_since.is_some() {
+            Mode::Fallback
+        } else {
+            Mode::Primary
+        }
+    }
+
+    /// The robot is not driving (no task, a safety stop, the goal reached, carried): the hold
+    /// timer starts afresh when it drives again, and a recovery ends.
+    pub fn idle(&mut self, dt_s: f64) {
+        self.clock_s += dt_s;
+        self.held_s = 0.0;
+        self.fallback_since = None;
+    }
+
+    /// One driving cycle of `dt_s` at `pose`; `monitor` is what the collision monitor did to
+    /// the previous cycle's command (`None`: nothing to check, or it is off). Returns who
+    /// drives this cycle.
+    pub fn drive(&mut self, dt_s: f64, pose: Pose2D, monitor: Option<Verdict>) -> Mode {
+        self.clock_s += dt_s;
+        let now = self.clock_s;
+        let c = self.config;
+        if !c.enabled {
+            return Mode::Primary;
+        }
+        if let Some((start, since_s)) = self.fallback_since {
+            if pose.distance_m(&start) >= c.release_m || now - since_s >= c.max_s {
+                self.fallback_since = None;
+                self.held_s = 0.0;
+                return Mode::Primary;
+            }
+            return Mode::Fallback;
+        }
+        let held = monitor.is_some_and(|m| m.limited() && m.v_mps.abs() < c.held_speed_mps);
+        self.held_s = if held {
+            self.held_s + dt_s
+        } else {
+            (self.held_s - dt_s).max(0.0)
+        };
+        if self.held_s >= c.stall_s {
+            self.fallback_since = Some((pose, now));
+            self.held_s = 0.0;
+            self.recoveries += 1;
+            tracing::debug!(
+                x_m = pose.x_m,
+                y_m = pose.y_m,
+                recoveries = self.recoveries,
+                "held by the collision monitor: the dynamic window takes over"
+            );
+            return Mode::Fallback;
+        }
+        Mode::Primary
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const DT: f64 = 0.1;
+
+    /// The monitor's verdict on a command it slowed to `v_mps` (or passed, `None`).
+    fn verdict(v_mps: Option<f64>) -> Option<Verdict> {
+        v_mps.map(|v_mps| Verdict {
+            v_mps,
+            omega_radps: 0.0,
+            scale: 0.1,
+            time_to_collision_s: Some(1.2),
+        })
+    }
+
+    /// The cycles until the mode first changes from what the first cycle gives.
+    fn until_switch(r: &mut Recovery, pose: Pose2D, held: Option<f64>) -> usize {
+        let first = r.drive(DT, pose, verdict(held));
+        (1..1000)
+            .find(|_| r.drive(DT, pose, verdict(held)) != first)
+            .expect("no switch within 100 s")
+    }
+
+    #[test]
+    fn held_for_stall_s_hands_over_and_headway_hands_back() {
+        let mut r = Recovery::new(RecoveryConfig::default());
+        let here = Pose2D::new(1.0, 2.0, 0.0);
+        // 1 s of cycles slowed to a crawl.
+        let n = until_switch(&mut r, here, Some(0.05));
+        assert!((9..=11).contains(&n), "{n}");
+        assert_eq!(r.mode(), Mode::Fallback);
+        assert_eq!(r.recoveries(), 1);
+        // The dynamic window drives until 1.5 m of headway ...
+        let on = Pose2D::new(2.4, 2.0, 0.0);
+        assert_eq!(r.drive(DT, on, None), Mode::Fallback);
+        // ... then the driving controller takes over again, the hold timed afresh.
+        let away = Pose2D::new(2.6, 2.0, 0.0);
+        assert_eq!(r.drive(DT, away, None), Mode::Primary);
+        let n = until_switch(&mut r, away, Some(0.0));
+        assert!((9..=11).contains(&n), "{n}");
+        assert_eq!(r.recoveries(), 2);
+    }
+
+    #[test]
+    fn standing_still_of_its_own_accord_or_slowed_a_little_is_not_held() {
+        // Before a glass door the laser cannot see: the controller stops, the monitor has
+        // nothing to check, and the dynamic window (blind to glass) must not take over.
+        let mut r = Recovery::new(RecoveryConfig::default());
+        let here = Pose2D::new(0.0, 0.0, 0.0);
+        for _ in 0..600 {
+            assert_eq!(r.drive(DT, here, None), Mode::Primary);
+        }
+        // Slowed, but still driving.
+        for _ in 0..600 {
+            assert_eq!(r.drive(DT, here, verdict(Some(0.6))), Mode::Primary);
+        }
+        assert_eq!(r.recoveries(), 0);
+    }
+
+    #[test]
+    fn free_cycles_take_held_time_off() {
+        let mut r = Recovery::new(RecoveryConfig::default());
+        let here = Pose2D::new(0.0, 0.0, 0.0);
+        // Held every other cycle: never a net second of it.
+        for k in 0..600 {
+            let held = (k % 2 == 0).then_some(0.0);
+            assert_eq!(r.drive(DT, here, verdict(held)), Mode::Primary, "cycle {k}");
+        }
+    }
+
+    #[test]
+    fn the_fallback_gives_up_after_max_s_and_stopping_ends_it() {
+        let mut r = Recovery::new(RecoveryConfig::default());
+        let here = Pose2D::new(0.0, 0.0, 0.0);
+        until_switch(&mut r, here, Some(0.0));
+        assert_eq!(r.mode(), Mode::Fallback);
+        // 12 s without headway.
+        let n = until_switch(&mut r, here, None);
+        assert!((119..=121).contains(&n), "{n}");
+        assert_eq!(r.mode(), Mode::Primary);
+        until_switch(&mut r, here, Some(0.0));
+        assert_eq!(r.mode(), Mode::Fallback);
+        r.idle(DT);
+        assert_eq!(r.mode(), Mode::Primary);
+        // After a stop the hold is timed afresh.
+        assert_eq!(r.drive(DT, here, verdict(Some(0.0))), Mode::Primary);
+    }
+
+    #[test]
+    fn off_means_off() {
+        let mut r = Recovery::new(RecoveryConfig {
+            enabled: false,
+            ..RecoveryConfig::default()
+        });
+        let here = Pose2D::new(0.0, 0.0, 0.0);
+        for _ in 0..100 {
+            assert_eq!(r.drive(DT, here, verdict(Some(0.0))), Mode::Primary);
+        }
+    }
+
+    #[test]
+    fn bad_config_names_the_field() {
+        RecoveryConfig::default().validate().unwrap();
+        let e = RecoveryConfig {
+            stall_s: 0.0,
+            ..RecoveryConfig::default()
+        }
+        .validate()
+        .unwrap_err();
+        assert!(e.to_string().contains("safety.recovery.stall_s = 0"), "{e}");
+        let e = RecoveryConfig {
+            held_speed_mps: f64::NAN,
+            ..RecoveryConfig::default()
+        }
+        .validate()
+        .unwrap_err();
+        assert!(e.to_string().contains("safety.recovery.held_speed_mps"), "{e}");
+    }
+}
