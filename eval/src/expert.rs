@@ -1129,7 +1129,8 @@ impl Expert {
                     }
                     Some(_) => {
                         // Clear again once it keeps the margin with room to spare for a while.
-                        if obstruction_clearance_m(x, y) - r >= hard + self.config.comfort_clearance_m
+                        if obstruction_clearance_m(x, y) - r
+                            >= hard + self.config.comfort_clearance_m
                         {
                             clear_run_m += len / n;
                             if clear_run_m >= 0.6 {
@@ -1732,9 +1733,12 @@ impl Expert {
             .iter()
             .map(|d| (d, c.people_margin_m, false));
         let robots = self.view.robots.iter().enumerate().map(|(i, d)| {
-            let standing = self.still_since_s.get(i).copied().flatten().is_some_and(|t| {
-                self.clock_s - t >= c.standing_robot_s
-            });
+            let standing = self
+                .still_since_s
+                .get(i)
+                .copied()
+                .flatten()
+                .is_some_and(|t| self.clock_s - t >= c.standing_robot_s);
             (d, c.robot_margin_m, standing)
         });
         for (d, margin, standing) in people.chain(robots) {

@@ -63,8 +63,7 @@ fn encounters_on(name: &str) -> (Prepared, BTreeMap<Encounter, Prepared>) {
                 &mut ChaCha8Rng::seed_from_u64(i as u64),
             );
             if added == Some(kind) {
-                let prepared =
-                    Prepared::new(&path, scenario, base.plan.clone(), &options).unwrap();
+                let prepared = Prepared::new(&path, scenario, base.plan.clone(), &options).unwrap();
                 found.insert(kind, prepared);
             }
         }
@@ -108,10 +107,7 @@ fn every_kind_fits_and_the_expert_handles_it_without_contact() {
                 }
             }
             Encounter::RobotParked => {
-                assert_eq!(
-                    s.parked_robots.len(),
-                    base.scenario.parked_robots.len() + 1
-                );
+                assert_eq!(s.parked_robots.len(), base.scenario.parked_robots.len() + 1);
                 let parked = s.parked_robots.last().unwrap();
                 let from_start = (parked.x_m - s.start.x_m).hypot(parked.y_m - s.start.y_m);
                 assert!(from_start >= 2.0, "parked {from_start} m from the start");

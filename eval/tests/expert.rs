@@ -105,7 +105,9 @@ fn run(name: &str, scenario: Scenario, max_s: f64) -> Run {
         }
         for j in 1..world.robot_count() {
             let q = world.ground_truth_pose(j).unwrap();
-            out.min_robot_gap_m = out.min_robot_gap_m.min(pose.distance_m(&q) - 2.0 * radius_m);
+            out.min_robot_gap_m = out
+                .min_robot_gap_m
+                .min(pose.distance_m(&q) - 2.0 * radius_m);
         }
         let boxes = world.furniture.iter().map(|f| f.shape);
         for b in boxes.chain(world.glass.iter().map(|g| g.shape)) {
@@ -233,7 +235,10 @@ fn drives_round_a_robot_standing_on_the_planned_path() {
     let r = run("behaviour_robot_parked", scenario, 90.0);
     assert!(r.collisions.is_empty(), "{:?}", r.collisions);
     assert_eq!(r.goals_reached, 1, "end {:?}", r.trajectory.last());
-    assert!(r.detoured, "the planner's path runs through the parked robot");
+    assert!(
+        r.detoured,
+        "the planner's path runs through the parked robot"
+    );
     assert!(
         r.min_robot_gap_m >= ExpertConfig::default().robot_margin_m,
         "{}",

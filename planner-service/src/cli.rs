@@ -123,8 +123,9 @@ pub struct DemoArgs {
     /// directory).
     #[arg(long)]
     pub scenario: Option<PathBuf>,
-    /// Controller per robot, cycled: dynamic-window, path-tracker, dlm, lpe, none.
-    #[arg(long, value_delimiter = ',', default_value = "dynamic-window")]
+    /// Controller per robot, cycled: lpe (LPE-Net, the default: it beats the dynamic window in
+    /// `eval table`, docs/evaluation.md), dynamic-window, path-tracker, dlm, none.
+    #[arg(long, value_delimiter = ',', default_value = "lpe")]
     pub controllers: Vec<protocol::ControllerKind>,
     /// Folder of the dlm/lpe/none models (<controller>.onnx). Default: $FLEET_MODELS_DIR,
     /// ./models or the user data directory.

@@ -662,11 +662,15 @@ pub struct AgentStatus {
     pub header: Header,
     pub state: AgentState,
     pub stop_reason: Option<StopReason>,
-    /// The active controller.
+    /// The configured controller (what the intentions must carry for it).
     pub controller: ControllerKind,
     /// The map the agent localizes on, once it has one.
     pub map: Option<MapRef>,
     pub localized: bool,
+    /// The dynamic window drives in place of `controller`, which the collision monitor kept
+    /// holding back (the agent's recovery, `[safety.recovery]`).
+    #[serde(default)]
+    pub recovering: bool,
 }
 
 impl AgentStatus {

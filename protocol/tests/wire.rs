@@ -131,6 +131,7 @@ fn status() -> AgentStatus {
         controller: ControllerKind::Dlm,
         map: Some(map_ref()),
         localized: true,
+        recovering: false,
     }
 }
 
@@ -253,6 +254,7 @@ fn every_status_and_task_state_round_trips() {
                 state,
                 stop_reason: reason.clone(),
                 map: None,
+                recovering: state == AgentState::Driving,
                 ..status()
             });
         }

@@ -9,8 +9,8 @@ use protocol::{MapName, Pose2D, SiteId};
 
 use crate::amcl::{AmclConfig, AmclError};
 use crate::collision_monitor::CollisionMonitorConfig;
-use crate::recovery::RecoveryConfig;
 use crate::controllers::{DynamicWindowConfig, PathTrackerConfig};
+use crate::recovery::RecoveryConfig;
 
 /// Velocity and acceleration limits of the base; network outputs in [-1, 1] scale by these.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]

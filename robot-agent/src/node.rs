@@ -37,12 +37,12 @@ use zenoh::Session;
 
 use crate::amcl::{Amcl, AmclError, LikelihoodField, UpdateOutcome};
 use crate::collision_monitor::{self, Verdict};
-use crate::recovery::{Mode, Recovery};
 use crate::config::{AgentConfig, ConfigError, ControllerKind, Limits};
 use crate::controllers::{
     Control, ControlInput, Controller, DynamicWindow, IntentionNet, IntentionNetError,
     IntentionNetOptions, PathTracker,
 };
+use crate::recovery::{Mode, Recovery};
 
 /// Why the node could not start or had to stop.
 #[derive(Debug, thiserror::Error)]
@@ -268,12 +268,11 @@ impl Supervisor {
             controller.kind(),
             ControllerKind::DynamicWindow | ControllerKind::Expert
         );
-        let fallback: Option<Box<dyn Controller>> =
-            if config.safety.recovery.enabled && relieved {
-                Some(Box::new(DynamicWindow::new(config.dynamic_window)?))
-            } else {
-                None
-            };
+        let fallback: Option<Box<dyn Controller>> = if config.safety.recovery.enabled && relieved {
+            Some(Box::new(DynamicWindow::new(config.dynamic_window)?))
+        } else {
+            None
+        };
         let recovery = Recovery::new(config.safety.recovery);
         Ok(Self {
             config,
@@ -650,9 +649,12 @@ impl Supervisor {
             header: Header::new(seq, stamp_ns),
             state: self.state,
             stop_reason: self.stop_reason.clone(),
-            controller: self.active_controller(),
+            // The configured one even while recovering: the planner renders the intention
+            // for it (the LPE image), and it takes over again.
+            controller: self.config.controller,
             map: Some(self.map.clone()),
             localized: self.localized(),
+            recovering: self.recovering,
         }
     }
 }
@@ -796,6 +798,7 @@ async fn run_in_session(
         controller: config.controller,
         map: None,
         localized: false,
+        recovering: false,
     };
     protocol::zenoh_io::publish(&status_pub, &starting).await?;
     tracing::info!(robot = %robot_id, site = %site, map = %map_name, controller = %config.controller, "agent starting");
@@ -866,6 +869,7 @@ async fn run_in_session(
     status_tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let mut cmd_seq = 0u64;
     let mut published: (AgentState, Option<StopReason>) = (AgentState::Starting, None);
+    let mut published_recovering = false;
 
     loop {
         tokio::select! {
@@ -937,17 +941,32 @@ async fn run_in_session(
                 };
                 protocol::zenoh_io::publish(&cmd_pub, &cmd).await?;
                 record(recorder, || LogMessage::CmdVel(cmd));
-                if !same_condition(
+                let condition_changed = !same_condition(
                     (published.0, published.1.as_ref()),
                     (decision.state, decision.stop_reason.as_ref()),
-                ) {
+                );
+                if condition_changed {
                     match &decision.stop_reason {
                         Some(reason) => tracing::info!(state = ?decision.state, "{reason}"),
                         None => tracing::info!(state = ?decision.state, "state changed"),
                     }
+                }
+                if decision.recovering != published_recovering {
+                    if decision.recovering {
+                        tracing::info!(
+                            recoveries = agent.recoveries(),
+                            "held back by the collision monitor: the dynamic window takes over"
+                        );
+                    } else {
+                        tracing::info!(controller = %agent.active_controller(), "recovered: handed back");
+                    }
+                }
+                // The status says whether it is recovering, so a hand-over is news too.
+                if condition_changed || decision.recovering != published_recovering {
                     status_seq += 1;
                     protocol::zenoh_io::publish(&status_pub, &agent.status(status_seq, clock.stamp_ns(now))).await?;
                     published = (decision.state, decision.stop_reason);
+                    published_recovering = decision.recovering;
                 }
             }
             _ = status_tick.tick() => {

@@ -18,7 +18,7 @@
 //! round first comes closer, and the window creeps or stays put. Measured with the path
 //! tracker on `behaviour_robot_parked`: when the hand-over waited for the robot to stand, the
 //! window drove 67 % of the 90 s run and never got past the parked robot; handing over below
-//! 0.5 m/s, it drove 24 % and the robot was through in 43 s.
+//! 0.5 m/s, it drove 17 % and the robot was through in 40 s.
 //!
 //! Plain data in (cycle length, pose, what the monitor did to the last command), the mode out;
 //! the [`Supervisor`](crate::Supervisor) switches controllers by it.
@@ -287,6 +287,9 @@ mod tests {
         }
         .validate()
         .unwrap_err();
-        assert!(e.to_string().contains("safety.recovery.held_speed_mps"), "{e}");
+        assert!(
+            e.to_string().contains("safety.recovery.held_speed_mps"),
+            "{e}"
+        );
     }
 }

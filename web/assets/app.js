@@ -669,12 +669,18 @@ function renderRobots() {
       dot.style.background = r.online ? colorOf(r.id) : '#9aa0a6';
       dot.title = r.online ? 'online' : 'offline';
       setText(tr.cells[0].querySelector('.name'), `${r.id}${r.online ? '' : ' (offline)'}`);
-      setText(tr.cells[1], r.status ? r.status.controller : '—');
+      setText(tr.cells[1], controllerText(r.status));
       setText(tr.cells[2], statusText(r));
       setText(tr.cells[3], r.task_id || '—');
       setText(tr.cells[4], ago(r.last_seen_ns));
     },
   );
+}
+
+// The configured controller; while the agent recovers, the dynamic window drives instead.
+function controllerText(status) {
+  if (!status) return '—';
+  return status.recovering ? `${status.controller} → dynamic-window (recovering)` : status.controller;
 }
 
 function taskStateText(task) {
@@ -805,7 +811,7 @@ function renderPanel() {
   setText(q('sel-online'), robot.online ? 'online' : 'offline');
   setText(q('sel-status'), statusText(robot));
   setText(q('sel-stop-reason'), formatStopReason(robot.status && robot.status.stop_reason));
-  setText(q('sel-controller'), (robot.status && robot.status.controller) || '—');
+  setText(q('sel-controller'), controllerText(robot.status));
   setText(q('sel-task'), robot.task_id || '—');
   setText(q('sel-map'), robot.map ? `${robot.map.name} v${robot.map.version}` : '—');
   const p = robot.pose;

@@ -720,9 +720,7 @@ pub fn run_with(
         #[allow(clippy::cast_precision_loss)]
         collision_monitor_share: monitor_on.then(|| monitor_limited as f64 / n),
         #[allow(clippy::cast_precision_loss)]
-        recovery_share: supervisor
-            .recovers()
-            .then(|| recovering_cycles as f64 / n),
+        recovery_share: supervisor.recovers().then(|| recovering_cycles as f64 / n),
         recoveries: supervisor.recovers().then(|| supervisor.recoveries()),
         intention_audit: truth_pipeline.is_some().then(|| auditor.finish()),
         wall_s: started.elapsed().as_secs_f64(),

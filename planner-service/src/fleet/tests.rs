@@ -60,6 +60,7 @@ fn status(localized: bool) -> AgentStatus {
         controller: ControllerKind::DynamicWindow,
         map: None,
         localized,
+        recovering: false,
     }
 }
 

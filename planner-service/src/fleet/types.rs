@@ -270,6 +270,9 @@ pub struct StatusView {
     pub stop_reason: Option<StopReason>,
     pub controller: ControllerKind,
     pub localized: bool,
+    /// The dynamic window drives in place of `controller` (the agent's recovery).
+    #[serde(default)]
+    pub recovering: bool,
 }
 
 impl From<&AgentStatus> for StatusView {
@@ -279,6 +282,7 @@ impl From<&AgentStatus> for StatusView {
             stop_reason: s.stop_reason.clone(),
             controller: s.controller,
             localized: s.localized,
+            recovering: s.recovering,
         }
     }
 }

@@ -201,12 +201,13 @@ fn schemas() -> Value {
             }
         },
         "RobotStatus": {
-            "type": "object", "required": ["state", "stop_reason", "controller", "localized"],
+            "type": "object", "required": ["state", "stop_reason", "controller", "localized", "recovering"],
             "properties": {
-                "state": { "type": "string", "enum": ["starting", "idle", "driving", "stopping", "stopped"] },
+                "state": { "type": "string", "enum": ["starting", "idle", "driving", "stopping", "stopped", "relocalizing"] },
                 "stop_reason": { "oneOf": [r("StopReason"), { "type": "null" }] },
                 "controller": { "type": "string", "enum": ["dlm", "lpe", "none", "path-tracker", "dynamic-window"] },
-                "localized": { "type": "boolean" }
+                "localized": { "type": "boolean" },
+                "recovering": { "type": "boolean", "description": "the dynamic window drives in place of controller, which the collision monitor kept holding back" }
             }
         },
         "Intention": {
