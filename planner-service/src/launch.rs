@@ -56,7 +56,7 @@ pub enum LaunchError {
     NoRobots,
     #[error("invalid controllers = {0}: it reads the simulator's ground truth, so no agent runs it (only `eval` does)")]
     NotDeployable(ControllerKind),
-    #[error("controller {controller} needs a model: {source}")]
+    #[error("controller {controller} needs a model")]
     ModelsDir {
         controller: ControllerKind,
         #[source]

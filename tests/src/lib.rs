@@ -163,6 +163,10 @@ impl Service {
                 std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()),
             )
             .env_remove("RUST_BACKTRACE");
+        if std::env::var_os("FLEET_MODELS_DIR").is_none() {
+            // The demo's robots drive with LPE-Net; the tests run outside the repository root.
+            cmd.env("FLEET_MODELS_DIR", repo_root().join("models"));
+        }
         if let Some(config) = config {
             cmd.arg("--config").arg(config);
         }
