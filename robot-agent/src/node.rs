@@ -11,6 +11,9 @@
 //! - applies the safety rules: no intention, a stale one, lost localization or a controller
 //!   error decelerate the robot to a stop with the reason in its [`AgentStatus`]; driving
 //!   resumes by itself when the cause goes away;
+//! - checks every command against the laser scan ([`crate::collision_monitor`]) and, when the
+//!   monitor keeps holding the controller back, lets the dynamic window drive round the
+//!   obstacle for a while ([`crate::recovery`]);
 //! - publishes [`AgentStatus`] at `status_rate_hz` and on every state change;
 //! - with [`NodeOptions::record`], records what it receives (odometry, scans, intentions, the
 //!   camera when asked) and publishes (poses, commands) as a run log (`fleet-log`, MCAP) on a
