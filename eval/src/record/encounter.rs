@@ -159,6 +159,12 @@ impl Route {
         self.length_m()
     }
 
+    /// The point `left_m` to the left of the path (negative: right) at arc length `s`.
+    fn beside(&self, s: f64, left_m: f64) -> (f64, f64) {
+        let (x, y, heading) = self.at(s);
+        (x - left_m * heading.sin(), y + left_m * heading.cos())
+    }
+
     /// Points every [`ROUTE_STEP_M`] from arc length `from` to `to` (either direction),
     /// `left_m` to the left of the path, cut short where one is not clear of walls, furniture
     /// and glass.
@@ -170,8 +176,7 @@ impl Route {
         for k in 0..=steps {
             #[allow(clippy::cast_precision_loss)]
             let s = from + (to - from) * k as f64 / n;
-            let (x, y, heading) = self.at(s);
-            let (x, y) = (x - left_m * heading.sin(), y + left_m * heading.cos());
+            let (x, y) = self.beside(s, left_m);
             if world
                 .disc_overlap(x, y, PERSON_RADIUS_M + ROUTE_CLEARANCE_M, None, false)
                 .is_some()
@@ -349,12 +354,9 @@ fn place(
             if s < 4.0 {
                 return None;
             }
-            let (x, y, heading) = route.at(s);
             let left_m = rng.gen_range(-PARKED_OFFSET_M..PARKED_OFFSET_M);
-            let (x, y) = (
-                round_cm(x - left_m * heading.sin()),
-                round_cm(y + left_m * heading.cos()),
-            );
+            let (x, y) = route.beside(s, left_m);
+            let (x, y) = (round_cm(x), round_cm(y));
             let r = world.config.base.radius_m;
             let away = 2.0 * r + PARKED_CLEARANCE_FROM_M;
             if world
