@@ -1051,24 +1051,37 @@ impl Expert {
     /// Notes which other robots stand still and since when, and lists those that have stood
     /// for `standing_robot_s` as obstructions.
     fn track_standing(&mut self) {
-        let c = &self.config;
         self.still_since_s.resize(self.view.robots.len(), None);
-        self.standing.clear();
-        let grow_m = self.config.robot_margin_m - self.config.static_margin_m + STANDING_EXTRA_M;
         for (d, since) in self.view.robots.iter().zip(&mut self.still_since_s) {
             if d.vx_mps.hypot(d.vy_mps) >= STILL_MPS {
                 *since = None;
-                continue;
-            }
-            let t0 = *since.get_or_insert(self.clock_s);
-            if self.clock_s - t0 >= c.standing_robot_s {
-                self.standing.push(StandingDisc {
-                    x_m: d.x_m,
-                    y_m: d.y_m,
-                    radius_m: d.radius_m + grow_m.max(0.0),
-                });
+            } else if since.is_none() {
+                *since = Some(self.clock_s);
             }
         }
+        let grow_m =
+            (self.config.robot_margin_m - self.config.static_margin_m + STANDING_EXTRA_M).max(0.0);
+        self.standing = (0..self.view.robots.len())
+            .filter(|&i| self.has_stood(i))
+            .map(|i| {
+                let d = self.view.robots[i];
+                StandingDisc {
+                    x_m: d.x_m,
+                    y_m: d.y_m,
+                    radius_m: d.radius_m + grow_m,
+                }
+            })
+            .collect();
+    }
+
+    /// Whether other robot `i` (its index in the truth) has stood still for
+    /// `standing_robot_s`.
+    fn has_stood(&self, i: usize) -> bool {
+        self.still_since_s
+            .get(i)
+            .copied()
+            .flatten()
+            .is_some_and(|t| self.clock_s - t >= self.config.standing_robot_s)
     }
 
     /// Builds `self.reference` from the planner's path in `self.path`; returns the distance
@@ -1732,15 +1745,15 @@ impl Expert {
             .people
             .iter()
             .map(|d| (d, c.people_margin_m, false));
-        let robots = self.view.robots.iter().enumerate().map(|(i, d)| {
-            let standing = self
-                .still_since_s
-                .get(i)
-                .copied()
-                .flatten()
-                .is_some_and(|t| self.clock_s - t >= c.standing_robot_s);
-            (d, c.robot_margin_m, standing)
-        });
+        let stood: Vec<bool> = (0..self.view.robots.len())
+            .map(|i| self.has_stood(i))
+            .collect();
+        let robots = self
+            .view
+            .robots
+            .iter()
+            .zip(stood)
+            .map(|(d, stood)| (d, c.robot_margin_m, stood));
         for (d, margin, standing) in people.chain(robots) {
             let dist = (d.x_m - pose.x_m).hypot(d.y_m - pose.y_m);
             let speed = d.vx_mps.hypot(d.vy_mps);
