@@ -7,7 +7,8 @@
 //! because the machines that make these pictures need not have a font file.
 //!
 //! Pictures are north (grid +y) up. Walls are grey on white floor, the ground-truth furniture
-//! brown and glass cyan, drawn at least 3 px thick so a 4 cm pane shows. The planned path is a
+//! brown, parked robots (`parked_robots` of the scenario) dark slate discs and glass cyan,
+//! drawn at least 3 px thick so a 4 cm pane shows. The planned path is a
 //! dashed light-blue line, traces solid in their method's colour; an intervention is an X and a
 //! collision a hollow square, both in the trace's colour. Consecutive trace points more than
 //! [`TRACE_GAP_M`] apart (a robot carried elsewhere) are not joined.
@@ -53,6 +54,7 @@ pub const WALL: [u8; 3] = [150, 150, 150];
 pub const UNKNOWN: [u8; 3] = [205, 205, 205];
 pub const FURNITURE: [u8; 3] = [150, 105, 60];
 pub const GLASS: [u8; 3] = [0, 175, 220];
+pub const PARKED_ROBOT: [u8; 3] = [70, 80, 95];
 pub const PLANNED: [u8; 3] = [130, 185, 245];
 pub const GOAL: [u8; 3] = [215, 30, 30];
 pub const START: [u8; 3] = [20, 160, 60];
@@ -428,9 +430,10 @@ const SMALL: Style = Style {
     text_scale: 1,
 };
 
-/// The plan (walls grey, free white, unknown light grey) with the ground-truth furniture and
-/// glass drawn in, inside the view's bounds.
+/// The plan (walls grey, free white, unknown light grey) with the ground-truth furniture,
+/// parked robots and glass drawn in, inside the view's bounds.
 fn draw_map(cv: &mut Canvas, view: &View<'_>, world: &World) {
+    let parked_radius_m = world.config.base.radius_m;
     let b = view.bounds();
     // Glass is at least 3 px thick: a 4 cm pane is under one pixel at these scales.
     let glass_reach_m = 1.5 / view.px_per_m();
@@ -449,6 +452,14 @@ fn draw_map(cv: &mut Canvas, view: &View<'_>, world: &World) {
                 .any(|f| f.shape.distance(wx, wy) <= 0.0)
             {
                 c = FURNITURE;
+            }
+            if world
+                .scenario
+                .parked_robots
+                .iter()
+                .any(|p| (p.x_m - wx).hypot(p.y_m - wy) <= parked_radius_m)
+            {
+                c = PARKED_ROBOT;
             }
             if world
                 .glass
@@ -757,6 +768,20 @@ mod tests {
         assert_eq!(glyph(' '), [0; 7]);
         assert_eq!(text_width_px("ab", 2), 22);
         assert_eq!(text_width_px("", 2), 0);
+    }
+
+    #[test]
+    fn scenario_picture_shows_parked_robots() {
+        let w = world("behaviour_robot_parked");
+        let parked = w.scenario.parked_robots[0];
+        let img = scenario_picture(&w, &[], &[], &[]);
+        let view = View::at_scale(&w.plan, SCENARIO_PX_PER_M);
+        assert_eq!(px(&img, view.to_px(parked.x_m, parked.y_m)), PARKED_ROBOT);
+        assert_eq!(
+            px(&img, view.to_px(parked.x_m + 0.4, parked.y_m)),
+            FREE,
+            "a disc of the robot's radius"
+        );
     }
 
     #[test]
