@@ -537,3 +537,90 @@ fn dynamic_window_stops_for_a_person_stepping_in_front() {
     // Once the person has gone it drives on to the goal.
     assert!(d.reached_goal, "{}", summary(&d));
 }
+
+/// Drives `controller` on `truth` towards `goal` as the fleet does: every cycle the real
+/// intention pipeline plans hybrid A* from the true pose and the controller follows that path.
+/// Returns the time the pipeline counted the goal reached (None: not within `max_time_s`) and
+/// the closest the robot came to the goal.
+fn drive_replanned(
+    truth: &OccupancyGrid,
+    controller: &mut dyn Controller,
+    start: Pose2D,
+    v0_mps: f64,
+    goal: (f64, f64),
+    max_time_s: f64,
+) -> (Option<f64>, f64) {
+    use planning::{Answer, Goal, GoalProgress, IntentionConfig, IntentionPlanner, PlanningMap};
+    use protocol::{Header, PoseEstimate};
+    let config = IntentionConfig::default();
+    let planning = std::sync::Arc::new(PlanningMap::new(truth.clone(), &config.planner).unwrap());
+    let mut pipeline = IntentionPlanner::new(planning, config).unwrap();
+    let goals = [Goal::at(goal.0, goal.1)];
+    let limits = Limits::default();
+    let laser = Laser::default();
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let (mut pose, mut v, mut w) = (start, v0_mps, 0.0);
+    let mut closest_m = f64::INFINITY;
+    for step in 0..(max_time_s / DT_S).round() as u64 {
+        let t_s = step as f64 * DT_S;
+        let header = Header::new(step, (t_s * 1e9) as u64);
+        let estimate = PoseEstimate {
+            header: header.clone(),
+            pose,
+            covariance: [0.0; 9],
+            sensor_stamp_ns: header.stamp_ns,
+            map: map_ref("depot"),
+        };
+        let it = match pipeline.answer(&estimate, &GoalProgress::new(&goals, 0), false) {
+            Answer::Done => return (Some(t_s), closest_m),
+            Answer::Heading { goal_index, plan } => plan
+                .unwrap()
+                .intention(header, &estimate, None, goal_index, false),
+        };
+        let scan = laser.scan(truth, &pose, step, &mut rng);
+        let control = controller
+            .control(&ControlInput {
+                pose,
+                v_mps: v,
+                omega_radps: w,
+                scan: Some(&scan),
+                camera: None,
+                intention: Some(&it),
+                limits: &limits,
+                dt_s: DT_S,
+            })
+            .unwrap();
+        (v, w) = control.to_physical(&limits);
+        let th = pose.yaw_rad + 0.5 * w * DT_S;
+        pose.x_m += v * DT_S * th.cos();
+        pose.y_m += v * DT_S * th.sin();
+        pose.yaw_rad = protocol::normalize_angle(pose.yaw_rad + w * DT_S);
+        closest_m = closest_m.min((pose.x_m - goal.0).hypot(pose.y_m - goal.1));
+    }
+    (None, closest_m)
+}
+
+#[test]
+fn dynamic_window_turns_into_a_goal_it_passes_at_speed_instead_of_looping() {
+    // At full speed with the goal beside the robot: closer than the planner's minimum turning
+    // radius allows, so every new search loops round to it. Following that loop took 6 s here,
+    // and in a small room with localisation noise it passed the goal just outside the tolerance
+    // and circled it until a person stepped in (task D's last goal, 2026-11-26).
+    let truth = load_nav2("depot");
+    let limits = Limits::default();
+    for (dx_m, dy_m) in [(0.3, 0.5), (0.0, 0.6), (-0.2, 0.5)] {
+        let (reached_s, closest_m) = drive_replanned(
+            &truth,
+            &mut dwa(),
+            Pose2D::new(5.0, 7.5, 0.0),
+            limits.max_speed_mps,
+            (5.0 + dx_m, 7.5 + dy_m),
+            30.0,
+        );
+        println!("goal at ({dx_m}, {dy_m}) from the robot: reached at {reached_s:?} s");
+        assert!(
+            reached_s.is_some_and(|t| t < 4.0),
+            "goal at ({dx_m}, {dy_m}): reached at {reached_s:?} s, closest {closest_m:.2} m"
+        );
+    }
+}

@@ -211,6 +211,20 @@ impl DynamicWindow {
             .fold(f64::INFINITY, f64::min)
     }
 
+    /// Whether no kept scan point lies within `radius_m` of the segment from the robot to `to`.
+    fn line_clear(&self, to: (f64, f64), radius_m: f64) -> bool {
+        let len_sq = to.0 * to.0 + to.1 * to.1;
+        self.points.iter().all(|p| {
+            let t = if len_sq < 1e-18 {
+                0.0
+            } else {
+                ((p[0] * to.0 + p[1] * to.1) / len_sq).clamp(0.0, 1.0)
+            };
+            let (dx, dy) = (p[0] - t * to.0, p[1] - t * to.1);
+            dx * dx + dy * dy >= radius_m * radius_m
+        })
+    }
+
     /// Fox's dist(v, ω): arc length along curvature `kappa`, starting at heading `heading_rad`,
     /// before the inflated disc touches a scan point; infinite when nothing does within the cap.
     fn free_distance(&self, kappa: f64, heading_rad: f64, inflated_m: f64, start_sq: f64) -> f64 {
@@ -558,8 +572,17 @@ impl Controller for DynamicWindow {
             self.nav.propagate();
             self.nav.value(0.0, 0.0).is_finite()
         };
-        let blocked_ahead = use_nav && !self.nav.visible(lookahead);
-        let (target, target_is_goal) = if blocked_ahead {
+        // Near the goal the planner's path can loop: a hybrid-A* search from a pose heading past
+        // the goal comes round at its minimum turning radius, and a robot following that loop at
+        // speed passes the goal just outside the tolerance, replans the same loop and circles.
+        // With the goal in straight sight within the look-ahead, head for the goal itself.
+        let goal_m = goal.0.hypot(goal.1);
+        let goal_in_sight = goal_m < c.lookahead_m && self.line_clear(goal, c.robot_radius_m);
+        let blocked_ahead = !goal_in_sight && use_nav && !self.nav.visible(lookahead);
+        let (target, target_is_goal) = if goal_in_sight {
+            self.carrot = None;
+            (goal, true)
+        } else if blocked_ahead {
             let side = |p: (f64, f64)| (lookahead.0 * p.1 - lookahead.1 * p.0).signum();
             let kept = self
                 .carrot
@@ -588,6 +611,18 @@ impl Controller for DynamicWindow {
         } else {
             self.carrot = None;
             (lookahead, lookahead_is_goal)
+        };
+        // Slow enough to turn into the goal: the arc tangent to the heading through the goal has
+        // radius d² / 2|y|, and a goal behind is turned to on the spot.
+        let v_hi = if goal_in_sight {
+            let cap_mps = if goal.0 > 0.0 {
+                limits.max_turn_radps * goal_m * goal_m / (2.0 * goal.1.abs()).max(1e-9)
+            } else {
+                0.0
+            };
+            v_hi.min(cap_mps).max(v_lo)
+        } else {
+            v_hi
         };
         let start_dist = target.0.hypot(target.1);
         let brake = limits.max_accel_mps2;
@@ -685,6 +720,18 @@ impl Controller for DynamicWindow {
         };
         choice.candidates = candidates;
         choice.admissible = admissible;
+        tracing::trace!(
+            v_mps = choice.v_mps,
+            omega_radps = choice.omega_radps,
+            score = choice.score,
+            free_m = choice.free_m,
+            admissible,
+            target_x_m = target.0,
+            target_y_m = target.1,
+            blocked_ahead,
+            goal_in_sight,
+            "dynamic window"
+        );
         self.last = Some(choice);
         Ok(Control::from_physical(
             choice.v_mps,
@@ -894,6 +941,30 @@ mod tests {
             .control(&input(0.1, 0.0, Some(&scan), &it, &limits, 0.0))
             .unwrap_err();
         assert!(err.to_string().contains("dt_s"), "{err}");
+    }
+
+    #[test]
+    fn heads_for_a_goal_in_sight_and_not_through_a_wall() {
+        let limits = Limits::default();
+        let mut dwa = DynamicWindow::new(DynamicWindowConfig::default()).unwrap();
+        // A path that loops out to the left and comes back to a goal 1 m ahead.
+        let loop_path: Vec<Pose2D> = (0..=30)
+            .map(|i| {
+                let a = std::f64::consts::PI * f64::from(i) / 30.0;
+                Pose2D::new(0.5 - 0.5 * a.cos(), 1.0 * a.sin(), a)
+            })
+            .collect();
+        let it = intention(loop_path);
+        let free = scan_with_wall(None);
+        dwa.control(&input(0.5, 0.0, Some(&free), &it, &limits, 0.1))
+            .unwrap();
+        let at_goal = |t: (f64, f64)| (t.0 - 1.0).hypot(t.1) < 1e-9;
+        assert!(at_goal(dwa.last_choice().unwrap().target_m));
+        // A wall between the robot and the goal: the path's look-ahead point, not the goal.
+        let wall = scan_with_wall(Some(0.6));
+        dwa.control(&input(0.5, 0.0, Some(&wall), &it, &limits, 0.1))
+            .unwrap();
+        assert!(!at_goal(dwa.last_choice().unwrap().target_m));
     }
 
     #[test]
