@@ -565,7 +565,7 @@ fn drive_replanned(
         let t_s = step as f64 * DT_S;
         let header = Header::new(step, (t_s * 1e9) as u64);
         let estimate = PoseEstimate {
-            header: header.clone(),
+            header,
             pose,
             covariance: [0.0; 9],
             sensor_stamp_ns: header.stamp_ns,
