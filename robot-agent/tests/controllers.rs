@@ -601,26 +601,33 @@ fn drive_replanned(
 }
 
 #[test]
-fn dynamic_window_turns_into_a_goal_it_passes_at_speed_instead_of_looping() {
+fn path_followers_turn_into_a_goal_they_pass_at_speed_instead_of_looping() {
     // At full speed with the goal beside the robot: closer than the planner's minimum turning
     // radius allows, so every new search loops round to it. Following that loop took 6 s here,
-    // and in a small room with localisation noise it passed the goal just outside the tolerance
-    // and circled it until a person stepped in (task D's last goal, 2026-11-26).
+    // and in a small room with localisation noise both controllers passed the goal just outside
+    // the tolerance and circled it until a person stepped in (task D's last goal, 2026-11-26).
     let truth = load_nav2("depot");
     let limits = Limits::default();
-    for (dx_m, dy_m) in [(0.3, 0.5), (0.0, 0.6), (-0.2, 0.5)] {
-        let (reached_s, closest_m) = drive_replanned(
-            &truth,
-            &mut dwa(),
-            Pose2D::new(5.0, 7.5, 0.0),
-            limits.max_speed_mps,
-            (5.0 + dx_m, 7.5 + dy_m),
-            30.0,
-        );
-        println!("goal at ({dx_m}, {dy_m}) from the robot: reached at {reached_s:?} s");
-        assert!(
-            reached_s.is_some_and(|t| t < 4.0),
-            "goal at ({dx_m}, {dy_m}): reached at {reached_s:?} s, closest {closest_m:.2} m"
-        );
+    type Make = fn() -> Box<dyn Controller>;
+    let controllers: [(&str, Make); 2] = [
+        ("dynamic window", || Box::new(dwa())),
+        ("path tracker", || Box::new(tracker())),
+    ];
+    for (name, make) in controllers {
+        for (dx_m, dy_m) in [(0.3, 0.5), (0.0, 0.6), (-0.2, 0.5)] {
+            let (reached_s, closest_m) = drive_replanned(
+                &truth,
+                make().as_mut(),
+                Pose2D::new(5.0, 7.5, 0.0),
+                limits.max_speed_mps,
+                (5.0 + dx_m, 7.5 + dy_m),
+                30.0,
+            );
+            println!("{name}, goal at ({dx_m}, {dy_m}) from the robot: reached at {reached_s:?} s");
+            assert!(
+                reached_s.is_some_and(|t| t < 4.0),
+                "{name}, goal at ({dx_m}, {dy_m}): reached at {reached_s:?} s, closest {closest_m:.2} m"
+            );
+        }
     }
 }

@@ -148,7 +148,20 @@ impl Controller for PathTracker {
         let limits = input.limits;
         let lookahead_m =
             (c.lookahead_m + c.lookahead_per_speed_s * input.v_mps.abs()).min(c.max_lookahead_m);
-        let target = task.path.point_ahead(&task.projection, lookahead_m);
+        // Near the goal the planner's path can loop (a hybrid-A* search from a pose heading past
+        // the goal comes round at its minimum turning radius); pure pursuit along the loop passed
+        // the goal just outside the tolerance and circled it. After Coulter's rule (the goal is
+        // the look-ahead point when no path point lies beyond the look-ahead circle), with the
+        // largest look-ahead circle: a loop at speed reaches beyond the speed-scaled one.
+        let target = if task.path.stays_within(
+            &task.projection,
+            (input.pose.x_m, input.pose.y_m),
+            c.max_lookahead_m,
+        ) {
+            task.path.goal()
+        } else {
+            task.path.point_ahead(&task.projection, lookahead_m)
+        };
         let (tx, ty) = to_robot_frame(&input.pose, target);
         let alpha = ty.atan2(tx);
 
@@ -306,6 +319,18 @@ impl<'a> PathRef<'a> {
             }
         }
         best
+    }
+
+    /// Whether every path point from `from` to the goal lies within `radius_m` of `centre`.
+    pub(crate) fn stays_within(
+        &self,
+        from: &Projection,
+        centre: (f64, f64),
+        radius_m: f64,
+    ) -> bool {
+        self.poses[from.segment + 1..]
+            .iter()
+            .all(|p| (p.x_m - centre.0).hypot(p.y_m - centre.1) <= radius_m)
     }
 
     /// The point `distance_m` further along the path from `from`; the goal if the path ends first.
@@ -523,6 +548,38 @@ mod tests {
             .unwrap()
             .to_physical(&limits);
         assert!(v < limits.max_speed_mps - 0.05, "{v}");
+    }
+
+    #[test]
+    fn aims_at_the_goal_when_the_rest_of_the_path_loops_close_by() {
+        let limits = Limits::default();
+        let mut pt = PathTracker::new(PathTrackerConfig::default()).unwrap();
+        // A loop out to the left and back to a goal 1 m straight ahead.
+        let loop_path: Vec<Pose2D> = (0..=30)
+            .map(|i| {
+                let a = std::f64::consts::PI * f64::from(i) / 30.0;
+                Pose2D::new(0.5 - 0.5 * a.cos(), a.sin(), a)
+            })
+            .collect();
+        let it = intention(loop_path, Dlm::GoForward);
+        let (_, w) = pt
+            .control(&input(Pose2D::default(), 0.5, Some(&it), &limits))
+            .unwrap()
+            .to_physical(&limits);
+        assert!(w.abs() < 1e-9, "{w}");
+        // The same loop reaching 2 m out is a path to follow, not a loop to cut.
+        let wide: Vec<Pose2D> = (0..=30)
+            .map(|i| {
+                let a = std::f64::consts::PI * f64::from(i) / 30.0;
+                Pose2D::new(0.5 - 0.5 * a.cos(), 2.0 * a.sin(), a)
+            })
+            .collect();
+        let it = intention(wide, Dlm::GoForward);
+        let (_, w) = pt
+            .control(&input(Pose2D::default(), 0.5, Some(&it), &limits))
+            .unwrap()
+            .to_physical(&limits);
+        assert!(w > 0.1, "{w}");
     }
 
     #[test]
