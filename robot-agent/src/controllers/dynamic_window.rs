@@ -20,6 +20,11 @@
 //! plain Fox in front of the obstacle. A small navigation function on the scan around the robot
 //! (after Brock & Khatib's global dynamic window, 1999) then supplies a detour point to head
 //! for, with hysteresis so that the robot keeps to the side it chose.
+//!
+//! A second: with the goal in straight sight within the look-ahead distance, the robot heads for
+//! the goal itself, no faster than lets it turn into it. The planner's path to a goal closer than
+//! its minimum turning radius allows loops round, and following that loop at speed circled the
+//! goal just outside the tolerance.
 
 use map_core::search::{MinCost, NEIGHBOURS_8};
 use protocol::normalize_angle;
