@@ -619,8 +619,12 @@ impl Supervisor {
             limits,
             dt_s: dt,
         };
+        let goal_m = intention
+            .path
+            .last()
+            .map_or(f64::INFINITY, |g| g.distance_m(&pose));
         let mode = if self.fallback.is_some() {
-            self.recovery.drive(dt, pose, self.last_verdict)
+            self.recovery.drive(dt, pose, goal_m, self.last_verdict)
         } else {
             Mode::Primary
         };

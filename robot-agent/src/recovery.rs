@@ -20,8 +20,15 @@
 //! window drove 67 % of the 90 s run and never got past the parked robot; handing over below
 //! 0.5 m/s, it drove 17 % and the robot was through in 40 s.
 //!
-//! Plain data in (cycle length, pose, what the monitor did to the last command), the mode out;
-//! the [`Supervisor`](crate::Supervisor) switches controllers by it.
+//! A second trigger: short of the goal. LPE-Net slows down as the drawn path ends and too often
+//! comes to rest half a metre to a metre before the goal, with nothing in the way (8 of its 28
+//! interventions on tasks A–E, 2026-11-26). Within [`RecoveryConfig::approach_m`] of the goal, a
+//! controller that has not brought the robot [`APPROACH_PROGRESS_M`] closer for
+//! [`RecoveryConfig::approach_stall_s`] is relieved too, and the dynamic window (which heads for a
+//! goal in sight) drives the rest of the way.
+//!
+//! Plain data in (cycle length, pose, distance to the goal, what the monitor did to the last
+//! command), the mode out; the [`Supervisor`](crate::Supervisor) switches controllers by it.
 
 use protocol::Pose2D;
 
@@ -44,7 +51,14 @@ pub struct RecoveryConfig {
     pub release_m: f64,
     /// ... or after this long, whichever comes first.
     pub max_s: f64,
+    /// Within this distance of the goal (the end of the planned path) ...
+    pub approach_m: f64,
+    /// ... a controller that brings the robot no closer for this long is relieved too.
+    pub approach_stall_s: f64,
 }
+
+/// What counts as coming closer to the goal, for [`RecoveryConfig::approach_stall_s`].
+pub const APPROACH_PROGRESS_M: f64 = 0.1;
 
 impl Default for RecoveryConfig {
     fn default() -> Self {
@@ -54,6 +68,8 @@ impl Default for RecoveryConfig {
             stall_s: 1.0,
             release_m: 1.5,
             max_s: 12.0,
+            approach_m: 1.0,
+            approach_stall_s: 3.0,
         }
     }
 }
@@ -69,6 +85,8 @@ impl RecoveryConfig {
             ("safety.recovery.stall_s", self.stall_s),
             ("safety.recovery.release_m", self.release_m),
             ("safety.recovery.max_s", self.max_s),
+            ("safety.recovery.approach_m", self.approach_m),
+            ("safety.recovery.approach_stall_s", self.approach_stall_s),
         ])
     }
 }
@@ -93,6 +111,8 @@ pub struct Recovery {
     fallback_since: Option<(Pose2D, f64)>,
     /// How many times the dynamic window took over.
     recoveries: u32,
+    /// The closest the robot has come to the goal, and when.
+    approach: Option<(f64, f64)>,
 }
 
 impl Recovery {
@@ -104,6 +124,7 @@ impl Recovery {
             held_s: 0.0,
             fallback_since: None,
             recoveries: 0,
+            approach: None,
         }
     }
 
@@ -128,12 +149,19 @@ impl Recovery {
         self.clock_s += dt_s;
         self.held_s = 0.0;
         self.fallback_since = None;
+        self.approach = None;
     }
 
-    /// One driving cycle of `dt_s` at `pose`; `monitor` is what the collision monitor did to
-    /// the previous cycle's command (`None`: nothing to check, or it is off). Returns who
-    /// drives this cycle.
-    pub fn drive(&mut self, dt_s: f64, pose: Pose2D, monitor: Option<Verdict>) -> Mode {
+    /// One driving cycle of `dt_s` at `pose`, `goal_m` from the goal; `monitor` is what the
+    /// collision monitor did to the previous cycle's command (`None`: nothing to check, or it is
+    /// off). Returns who drives this cycle.
+    pub fn drive(
+        &mut self,
+        dt_s: f64,
+        pose: Pose2D,
+        goal_m: f64,
+        monitor: Option<Verdict>,
+    ) -> Mode {
         self.clock_s += dt_s;
         let now = self.clock_s;
         let c = self.config;
@@ -144,8 +172,23 @@ impl Recovery {
             if pose.distance_m(&start) >= c.release_m || now - since_s >= c.max_s {
                 self.fallback_since = None;
                 self.held_s = 0.0;
+                self.approach = None;
                 return Mode::Primary;
             }
+            return Mode::Fallback;
+        }
+        // A new goal (further than the last by more than any wobble) starts the approach afresh.
+        self.approach = match self.approach {
+            Some((best_m, _)) if goal_m <= best_m - APPROACH_PROGRESS_M => Some((goal_m, now)),
+            Some((best_m, _)) if goal_m > best_m + 0.5 => Some((goal_m, now)),
+            None => Some((goal_m, now)),
+            kept => kept,
+        };
+        let short_of_goal = self.approach.is_some_and(|(best_m, since_s)| {
+            best_m <= c.approach_m && now - since_s >= c.approach_stall_s
+        });
+        if short_of_goal {
+            self.take_over(pose, now, "short of the goal");
             return Mode::Fallback;
         }
         let held = monitor.is_some_and(|m| m.limited() && m.v_mps.abs() < c.held_speed_mps);
@@ -155,18 +198,23 @@ impl Recovery {
             (self.held_s - dt_s).max(0.0)
         };
         if self.held_s >= c.stall_s {
-            self.fallback_since = Some((pose, now));
-            self.held_s = 0.0;
-            self.recoveries += 1;
-            tracing::debug!(
-                x_m = pose.x_m,
-                y_m = pose.y_m,
-                recoveries = self.recoveries,
-                "held by the collision monitor: the dynamic window takes over"
-            );
+            self.take_over(pose, now, "held by the collision monitor");
             return Mode::Fallback;
         }
         Mode::Primary
+    }
+
+    fn take_over(&mut self, pose: Pose2D, now: f64, why: &str) {
+        self.fallback_since = Some((pose, now));
+        self.held_s = 0.0;
+        self.approach = None;
+        self.recoveries += 1;
+        tracing::debug!(
+            x_m = pose.x_m,
+            y_m = pose.y_m,
+            recoveries = self.recoveries,
+            "{why}: the dynamic window takes over"
+        );
     }
 }
 
@@ -175,6 +223,8 @@ mod tests {
     use super::*;
 
     const DT: f64 = 0.1;
+    /// A goal further than `approach_m`.
+    const FAR_M: f64 = 20.0;
 
     /// The monitor's verdict on a command it slowed to `v_mps` (or passed, `None`).
     fn verdict(v_mps: Option<f64>) -> Option<Verdict> {
@@ -188,9 +238,9 @@ mod tests {
 
     /// The cycles until the mode first changes from what the first cycle gives.
     fn until_switch(r: &mut Recovery, pose: Pose2D, held: Option<f64>) -> usize {
-        let first = r.drive(DT, pose, verdict(held));
+        let first = r.drive(DT, pose, FAR_M, verdict(held));
         (1..1000)
-            .find(|_| r.drive(DT, pose, verdict(held)) != first)
+            .find(|_| r.drive(DT, pose, FAR_M, verdict(held)) != first)
             .expect("no switch within 100 s")
     }
 
@@ -205,10 +255,10 @@ mod tests {
         assert_eq!(r.recoveries(), 1);
         // The dynamic window drives until 1.5 m of headway ...
         let on = Pose2D::new(2.4, 2.0, 0.0);
-        assert_eq!(r.drive(DT, on, None), Mode::Fallback);
+        assert_eq!(r.drive(DT, on, FAR_M, None), Mode::Fallback);
         // ... then the driving controller takes over again, the hold timed afresh.
         let away = Pose2D::new(2.6, 2.0, 0.0);
-        assert_eq!(r.drive(DT, away, None), Mode::Primary);
+        assert_eq!(r.drive(DT, away, FAR_M, None), Mode::Primary);
         let n = until_switch(&mut r, away, Some(0.0));
         assert!((9..=11).contains(&n), "{n}");
         assert_eq!(r.recoveries(), 2);
@@ -221,11 +271,11 @@ mod tests {
         let mut r = Recovery::new(RecoveryConfig::default());
         let here = Pose2D::new(0.0, 0.0, 0.0);
         for _ in 0..600 {
-            assert_eq!(r.drive(DT, here, None), Mode::Primary);
+            assert_eq!(r.drive(DT, here, FAR_M, None), Mode::Primary);
         }
         // Slowed, but still driving.
         for _ in 0..600 {
-            assert_eq!(r.drive(DT, here, verdict(Some(0.6))), Mode::Primary);
+            assert_eq!(r.drive(DT, here, FAR_M, verdict(Some(0.6))), Mode::Primary);
         }
         assert_eq!(r.recoveries(), 0);
     }
@@ -237,7 +287,11 @@ mod tests {
         // Held every other cycle: never a net second of it.
         for k in 0..600 {
             let held = (k % 2 == 0).then_some(0.0);
-            assert_eq!(r.drive(DT, here, verdict(held)), Mode::Primary, "cycle {k}");
+            assert_eq!(
+                r.drive(DT, here, FAR_M, verdict(held)),
+                Mode::Primary,
+                "cycle {k}"
+            );
         }
     }
 
@@ -256,7 +310,38 @@ mod tests {
         r.idle(DT);
         assert_eq!(r.mode(), Mode::Primary);
         // After a stop the hold is timed afresh.
-        assert_eq!(r.drive(DT, here, verdict(Some(0.0))), Mode::Primary);
+        assert_eq!(r.drive(DT, here, FAR_M, verdict(Some(0.0))), Mode::Primary);
+    }
+
+    #[test]
+    fn stopping_short_of_the_goal_hands_over_and_coming_closer_does_not() {
+        let mut r = Recovery::new(RecoveryConfig::default());
+        let here = Pose2D::new(0.0, 0.0, 0.0);
+        // Creeping towards the goal, 5 cm a second: coming closer, never relieved.
+        for k in 0..200 {
+            let goal_m = 0.9 - 0.005 * f64::from(k);
+            assert_eq!(r.drive(DT, here, goal_m, None), Mode::Primary, "cycle {k}");
+        }
+        // Standing 0.8 m short: relieved after approach_stall_s ...
+        let mut r = Recovery::new(RecoveryConfig::default());
+        let n = (0..100)
+            .find(|_| r.drive(DT, here, 0.8, None) == Mode::Fallback)
+            .unwrap();
+        assert!((29..=31).contains(&n), "{n}");
+        assert_eq!(r.recoveries(), 1);
+        // ... but not standing further out than approach_m, before a glass door.
+        let mut r = Recovery::new(RecoveryConfig::default());
+        for _ in 0..600 {
+            assert_eq!(r.drive(DT, here, 1.2, None), Mode::Primary);
+        }
+        // The next goal, once one is reached, is timed afresh.
+        let mut r = Recovery::new(RecoveryConfig::default());
+        for _ in 0..20 {
+            r.drive(DT, here, 0.3, None);
+        }
+        for _ in 0..20 {
+            assert_eq!(r.drive(DT, here, 0.9, None), Mode::Primary);
+        }
     }
 
     #[test]
@@ -267,7 +352,8 @@ mod tests {
         });
         let here = Pose2D::new(0.0, 0.0, 0.0);
         for _ in 0..100 {
-            assert_eq!(r.drive(DT, here, verdict(Some(0.0))), Mode::Primary);
+            assert_eq!(r.drive(DT, here, FAR_M, verdict(Some(0.0))), Mode::Primary);
+            assert_eq!(r.drive(DT, here, 0.5, None), Mode::Primary);
         }
     }
 
