@@ -1,7 +1,8 @@
 //! Time per control step of the dynamic window controller on the Nav2 depot map (181-beam
 //! ray-cast scan with an unmapped box on the path), against references in the same run: the
 //! same controller without the local navigation function (plain Fox), with a denser window
-//! (21 x 41 samples), and the pure-pursuit path tracker. Then the collision monitor's check of
+//! (21 x 41 samples), and the pure-pursuit path tracker; and the default window with the goal in
+//! straight sight (it heads for the goal, checking the line to it on the scan). Then the collision monitor's check of
 //! one command on the same scan (what the agent adds after any controller), against the path
 //! tracker's step.
 //!
@@ -51,8 +52,21 @@ fn bench_step(c: &mut Criterion) {
         limits: &limits,
         dt_s: 0.1,
     };
+    // The same scan and pose, the goal 1.2 m ahead before the box: in straight sight, so the
+    // window heads for the goal and checks its line of sight on the scan.
+    let short: Vec<Pose2D> = (0..=12)
+        .map(|i| Pose2D::new(5.2 + 0.1 * f64::from(i), 7.5, 0.0))
+        .collect();
+    let near_goal = Intention {
+        map: fixtures::map_ref("depot"),
+        ..fixtures::intention(short, Dlm::GoForward)
+    };
+    let goal_input = ControlInput {
+        intention: Some(&near_goal),
+        ..input
+    };
     let default = DynamicWindowConfig::default();
-    let cases: [(&str, Box<dyn Controller>); 4] = [
+    let cases: [(&str, Box<dyn Controller>); 5] = [
         (
             "dwa_default_11x21",
             Box::new(DynamicWindow::new(default).expect("config")),
@@ -82,12 +96,21 @@ fn bench_step(c: &mut Criterion) {
             "path_tracker",
             Box::new(PathTracker::new(PathTrackerConfig::default()).expect("config")),
         ),
+        (
+            "dwa_default_goal_in_sight",
+            Box::new(DynamicWindow::new(default).expect("config")),
+        ),
     ];
     let mut group = c.benchmark_group("control_step");
     group.sample_size(30);
     for (name, mut controller) in cases {
+        let step_input = if name.ends_with("goal_in_sight") {
+            &goal_input
+        } else {
+            &input
+        };
         group.bench_function(name, |b| {
-            b.iter(|| black_box(controller.control(black_box(&input)).expect("control")));
+            b.iter(|| black_box(controller.control(black_box(step_input)).expect("control")));
         });
     }
     group.finish();

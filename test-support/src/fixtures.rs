@@ -50,3 +50,16 @@ pub fn straight_path(x0: f64, y0: f64, yaw_rad: f64, len_m: f64, step_m: f64) ->
         })
         .collect()
 }
+
+/// A path from the origin (heading +x) that swings out to the left, `reach_m` at most, and comes
+/// back to a goal 1 m straight ahead: the shape of a planner's loop round a goal too close to
+/// turn into.
+#[must_use]
+pub fn loop_path(reach_m: f64) -> Vec<Pose2D> {
+    (0..=30)
+        .map(|i| {
+            let a = std::f64::consts::PI * f64::from(i) / 30.0;
+            Pose2D::new(0.5 - 0.5 * a.cos(), reach_m * a.sin(), a)
+        })
+        .collect()
+}

@@ -538,14 +538,20 @@ impl Controller for DynamicWindow {
         );
         let goal = to_robot_frame(&input.pose, task.path.goal());
         let lookahead_is_goal = (goal.0 - lookahead.0).hypot(goal.1 - lookahead.1) < 1e-9;
+        // Near the goal the planner's path can loop: a hybrid-A* search from a pose heading past
+        // the goal comes round at its minimum turning radius, and a robot following that loop at
+        // speed passes the goal just outside the tolerance, replans the same loop and circles.
+        // With the goal in straight sight within the look-ahead, head for the goal itself.
+        let goal_m = goal.0.hypot(goal.1);
+        let goal_in_sight = goal_m < c.lookahead_m && self.line_clear(goal, c.robot_radius_m);
         // Fox's heading aims straight at the look-ahead point, which traps the robot in front of
         // an obstacle lying on the path. A navigation function on the scan around the robot
         // (Brock & Khatib's global dynamic window) knows the way around: when the look-ahead point
         // is out of sight behind an obstacle, the robot heads for the farthest point of the
         // function's descent that it can see. Elsewhere (and where the function has no answer,
         // e.g. the robot inside the inflation) plain Fox remains: the function's 8-connected
-        // gradient is too coarse to steer by directly.
-        let use_nav = c.local_grid_resolution_m > 0.0 && {
+        // gradient is too coarse to steer by directly. Heading for the goal in sight needs none.
+        let use_nav = !goal_in_sight && c.local_grid_resolution_m > 0.0 && {
             let half_m = c.lookahead_m + c.clearance_cap_m.min(1.0);
             let res = c.local_grid_resolution_m;
             self.nav.reset(half_m, res);
@@ -577,13 +583,7 @@ impl Controller for DynamicWindow {
             self.nav.propagate();
             self.nav.value(0.0, 0.0).is_finite()
         };
-        // Near the goal the planner's path can loop: a hybrid-A* search from a pose heading past
-        // the goal comes round at its minimum turning radius, and a robot following that loop at
-        // speed passes the goal just outside the tolerance, replans the same loop and circles.
-        // With the goal in straight sight within the look-ahead, head for the goal itself.
-        let goal_m = goal.0.hypot(goal.1);
-        let goal_in_sight = goal_m < c.lookahead_m && self.line_clear(goal, c.robot_radius_m);
-        let blocked_ahead = !goal_in_sight && use_nav && !self.nav.visible(lookahead);
+        let blocked_ahead = use_nav && !self.nav.visible(lookahead);
         let (target, target_is_goal) = if goal_in_sight {
             self.carrot = None;
             (goal, true)
@@ -953,13 +953,7 @@ mod tests {
         let limits = Limits::default();
         let mut dwa = DynamicWindow::new(DynamicWindowConfig::default()).unwrap();
         // A path that loops out to the left and comes back to a goal 1 m ahead.
-        let loop_path: Vec<Pose2D> = (0..=30)
-            .map(|i| {
-                let a = std::f64::consts::PI * f64::from(i) / 30.0;
-                Pose2D::new(0.5 - 0.5 * a.cos(), 1.0 * a.sin(), a)
-            })
-            .collect();
-        let it = intention(loop_path);
+        let it = intention(test_support::fixtures::loop_path(1.0));
         let free = scan_with_wall(None);
         dwa.control(&input(0.5, 0.0, Some(&free), &it, &limits, 0.1))
             .unwrap();

@@ -555,26 +555,14 @@ mod tests {
         let limits = Limits::default();
         let mut pt = PathTracker::new(PathTrackerConfig::default()).unwrap();
         // A loop out to the left and back to a goal 1 m straight ahead.
-        let loop_path: Vec<Pose2D> = (0..=30)
-            .map(|i| {
-                let a = std::f64::consts::PI * f64::from(i) / 30.0;
-                Pose2D::new(0.5 - 0.5 * a.cos(), a.sin(), a)
-            })
-            .collect();
-        let it = intention(loop_path, Dlm::GoForward);
+        let it = intention(test_support::fixtures::loop_path(1.0), Dlm::GoForward);
         let (_, w) = pt
             .control(&input(Pose2D::default(), 0.5, Some(&it), &limits))
             .unwrap()
             .to_physical(&limits);
         assert!(w.abs() < 1e-9, "{w}");
         // The same loop reaching 2 m out is a path to follow, not a loop to cut.
-        let wide: Vec<Pose2D> = (0..=30)
-            .map(|i| {
-                let a = std::f64::consts::PI * f64::from(i) / 30.0;
-                Pose2D::new(0.5 - 0.5 * a.cos(), 2.0 * a.sin(), a)
-            })
-            .collect();
-        let it = intention(wide, Dlm::GoForward);
+        let it = intention(test_support::fixtures::loop_path(2.0), Dlm::GoForward);
         let (_, w) = pt
             .control(&input(Pose2D::default(), 0.5, Some(&it), &limits))
             .unwrap()
