@@ -631,3 +631,26 @@ fn path_followers_turn_into_a_goal_they_pass_at_speed_instead_of_looping() {
         }
     }
 }
+
+#[test]
+fn dynamic_window_turns_to_a_goal_behind_it_towards_a_wall() {
+    // Relieved 0.42 m short of task C's second goal with the goal behind it, the window kept
+    // facing the open corridor: turning to the goal faced a wall 1.3 m away, and the clearance
+    // term outweighed the heading (2026-11-26). Beyond the goal the clearance does not matter.
+    let mut truth = load_nav2("depot");
+    // A wall just under 1 m beyond the goal: facing the goal is facing the wall.
+    add_box(&mut truth, 6.0, 7.5, 0.1, 6.0, 0.0);
+    let goal = (5.0, 8.0);
+    for yaw_rad in [-1.09, -1.6, 2.6] {
+        let start = Pose2D::new(goal.0 - 0.27, goal.1 - 0.27, yaw_rad);
+        let path = straight((start.x_m, start.y_m), goal);
+        let d = drive(&mut truth, &mut dwa(), &path, start, 15.0, &mut no_events);
+        println!("dwa, goal behind, yaw {yaw_rad}: {}", summary(&d));
+        assert!(d.reached_goal, "yaw {yaw_rad}: {}", summary(&d));
+        assert!(
+            d.trace.last().unwrap().0 < 5.0,
+            "yaw {yaw_rad}: {}",
+            summary(&d)
+        );
+    }
+}

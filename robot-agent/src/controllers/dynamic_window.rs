@@ -22,9 +22,9 @@
 //! for, with hysteresis so that the robot keeps to the side it chose.
 //!
 //! A second: with the goal in straight sight within the look-ahead distance, the robot heads for
-//! the goal itself, no faster than lets it turn into it. The planner's path to a goal closer than
-//! its minimum turning radius allows loops round, and following that loop at speed circled the
-//! goal just outside the tolerance.
+//! the goal itself, no faster than lets it turn into it, and clearance counts only as far as the
+//! goal. The planner's path to a goal closer than its minimum turning radius allows loops round,
+//! and following that loop at speed circled the goal just outside the tolerance.
 
 use map_core::search::{MinCost, NEIGHBOURS_8};
 use protocol::normalize_angle;
@@ -631,6 +631,14 @@ impl Controller for DynamicWindow {
         };
         let start_dist = target.0.hypot(target.1);
         let brake = limits.max_accel_mps2;
+        // Room beyond a goal in sight does not matter: the robot stops there. Scored to the cap,
+        // turning to a goal that lies before a wall lost to facing the open floor, and a robot
+        // relieved just short of a goal behind it never turned round (task C, 2026-11-26).
+        let clear_cap_m = if goal_in_sight {
+            c.clearance_cap_m.min(goal_m.max(c.arc_step_m))
+        } else {
+            c.clearance_cap_m
+        };
         let progress_scale = limits.max_speed_mps * c.horizon_s;
 
         let mut best: Option<Choice> = None;
@@ -675,7 +683,7 @@ impl Controller for DynamicWindow {
                     1.0 - normalize_angle(dy.atan2(dx) - eth).abs() / std::f64::consts::PI
                 };
                 let progress = ((start_dist - end_dist) / progress_scale).clamp(-1.0, 1.0);
-                let clearance = clear_m.min(c.clearance_cap_m) / c.clearance_cap_m;
+                let clearance = clear_m.min(clear_cap_m) / clear_cap_m;
                 let velocity = v / limits.max_speed_mps;
                 let score = c.heading_weight * heading
                     + c.progress_weight * progress
