@@ -34,13 +34,17 @@ fn bench_step(c: &mut Criterion) {
     let pose = Pose2D::new(5.2, 7.5, 0.0);
     let mut rng = ChaCha8Rng::seed_from_u64(3);
     let scan = amcl_world::Laser::default().scan(&truth, &pose, 0, &mut rng);
-    let path: Vec<Pose2D> = (0..=100)
-        .map(|i| Pose2D::new(2.0 + 0.1 * f64::from(i), 7.5, 0.0))
-        .collect();
-    let intention = Intention {
+    // A straight path along y = 7.5 from `x0_m`, `n` poses 0.1 m apart.
+    let straight = |x0_m: f64, n: u32| Intention {
         map: fixtures::map_ref("depot"),
-        ..fixtures::intention(path, Dlm::GoForward)
+        ..fixtures::intention(
+            (0..n)
+                .map(|i| Pose2D::new(x0_m + 0.1 * f64::from(i), 7.5, 0.0))
+                .collect(),
+            Dlm::GoForward,
+        )
     };
+    let intention = straight(2.0, 101);
     let limits = Limits::default();
     let input = ControlInput {
         pose,
@@ -54,13 +58,7 @@ fn bench_step(c: &mut Criterion) {
     };
     // The same scan and pose, the goal 1.2 m ahead before the box: in straight sight, so the
     // window heads for the goal and checks its line of sight on the scan.
-    let short: Vec<Pose2D> = (0..=12)
-        .map(|i| Pose2D::new(5.2 + 0.1 * f64::from(i), 7.5, 0.0))
-        .collect();
-    let near_goal = Intention {
-        map: fixtures::map_ref("depot"),
-        ..fixtures::intention(short, Dlm::GoForward)
-    };
+    let near_goal = straight(5.2, 13);
     let goal_input = ControlInput {
         intention: Some(&near_goal),
         ..input
