@@ -25,6 +25,7 @@ use robot_agent::{AgentConfig, ControllerKind};
 
 use crate::amcl_accuracy::{self, AccuracyOptions, TaskAccuracy};
 use crate::kidnap;
+use crate::record::encounter::Encounter;
 use crate::table::{self, TableOptions};
 
 /// Closed-loop evaluation of the intention fleet in the simulator.
@@ -206,6 +207,12 @@ pub struct TableArgs {
     /// (`[safety.recovery]`): the controller alone.
     #[arg(long)]
     no_recovery: bool,
+    /// Puts this scripted encounter (`person_ahead`, `person_oncoming`, `glass_door`,
+    /// `robot_parked`, `furniture`; as `eval record --encounters` draws them) on the path from
+    /// each scenario's start to its first goal, named `<scenario>-<kind>`; scenarios where it
+    /// does not fit are left out. With `--generated N`: the situation on N buildings.
+    #[arg(long)]
+    encounter: Option<Encounter>,
 }
 
 /// Arguments of `eval record`.
@@ -458,6 +465,21 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
     let mut prepared = table::prepare(&paths, &options)?;
     for seed in seed_range(args.generated_first_seed, args.generated)? {
         prepared.push(table::prepare_generated(seed, &options)?);
+    }
+    if let Some(kind) = args.encounter {
+        let (fitted, left_out) = table::with_encounter(prepared, kind, &options)?;
+        if !left_out.is_empty() {
+            eprintln!(
+                "no room for a {} encounter on the first leg of {} scenario(s), left out: {}",
+                kind.as_str(),
+                left_out.len(),
+                left_out.join(", ")
+            );
+        }
+        if fitted.is_empty() {
+            anyhow::bail!("--encounter {}: it fits on no scenario", kind.as_str());
+        }
+        prepared = fitted;
     }
     let runs = table::plan_runs(prepared.len(), &methods, &seeds);
     eprintln!(

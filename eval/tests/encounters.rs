@@ -1,7 +1,7 @@
 //! Scripted encounters (`eval record --encounters P`): each kind fits on a real training
 //! scenario's routes, a glass door really closes the passage from wall to wall, and the
-//! privileged expert, which labels these episodes, stops short of the door and keeps clear of
-//! the people without contact.
+//! privileged expert, which labels these episodes, stops short of the door, keeps clear of the
+//! people without contact and goes round a parked robot and furniture in its way.
 
 #![allow(clippy::unwrap_used)]
 use std::collections::BTreeMap;
@@ -83,7 +83,7 @@ fn every_kind_fits_and_the_expert_handles_it_without_contact() {
         "not every kind fitted on train_office"
     );
     let options = TableOptions {
-        time_limit_s: Some(45.0),
+        time_limit_s: Some(75.0),
         // No intervention: the expert must hold before the door by itself.
         stuck_timeout_s: 1000.0,
         ..TableOptions::default()
@@ -112,6 +112,47 @@ fn every_kind_fits_and_the_expert_handles_it_without_contact() {
                 let from_start = (parked.x_m - s.start.x_m).hypot(parked.y_m - s.start.y_m);
                 assert!(from_start >= 2.0, "parked {from_start} m from the start");
             }
+            Encounter::Furniture => {
+                assert_eq!(s.furniture.len(), base.scenario.furniture.len() + 1);
+                let shape = s.furniture.last().unwrap().shape();
+                assert!(shape.distance(s.start.x_m, s.start.y_m) >= 0.5);
+                // It stands in the way of a robot keeping to the floor plan's path ...
+                let mut planner = planning::Planner::new(
+                    std::sync::Arc::clone(&base.planning),
+                    options.intention.planner.clone(),
+                )
+                .unwrap();
+                let start = protocol::Pose2D::new(s.start.x_m, s.start.y_m, s.start.yaw_rad);
+                let goal = planning::Goal::at(s.goals[0].x_m, s.goals[0].y_m).pose_from(start);
+                let path = planner.plan(start, goal).unwrap();
+                let closest_m = path
+                    .poses
+                    .iter()
+                    .map(|p| shape.distance(p.x_m, p.y_m))
+                    .fold(f64::INFINITY, f64::min);
+                assert!(closest_m < 0.25, "the path passes {closest_m} m from it");
+                eprintln!(
+                    "furniture {:?} path {} m start {:?} goal {:?}",
+                    s.furniture.last(),
+                    path.length_m,
+                    start,
+                    goal
+                );
+                // ... and leaves a passage beside it.
+                let world = World::new(s.clone(), base.plan.clone(), SimConfig::default()).unwrap();
+                let free = path.poses.iter().any(|p| {
+                    (1..=12).any(|k| {
+                        let (nx, ny) = (-p.yaw_rad.sin(), p.yaw_rad.cos());
+                        [1.0, -1.0].iter().any(|side| {
+                            let d = side * 0.1 * f64::from(k);
+                            let (x, y) = (p.x_m + d * nx, p.y_m + d * ny);
+                            shape.distance(x, y) < 0.8
+                                && world.disc_overlap(x, y, 0.45, None, false).is_none()
+                        })
+                    })
+                });
+                assert!(free, "no 0.9 m passage beside the furniture");
+            }
             Encounter::PersonAhead | Encounter::PersonOncoming => {
                 assert_eq!(s.people.len(), base.scenario.people.len() + 1);
                 let person = s.people.last().unwrap();
@@ -128,7 +169,10 @@ fn every_kind_fits_and_the_expert_handles_it_without_contact() {
         assert_eq!(result.collisions.glass, 0, "{kind:?}: {result:?}");
         assert_eq!(result.collisions.person, 0, "{kind:?}: {result:?}");
         assert_eq!(result.collisions.robot, 0, "{kind:?}: {result:?}");
-        if *kind == Encounter::RobotParked {
+        if *kind == Encounter::Furniture {
+            assert_eq!(result.collisions.furniture, 0, "{result:?}");
+        }
+        if matches!(kind, Encounter::RobotParked | Encounter::Furniture) {
             // Gone round, not followed for ever.
             assert_eq!(result.goals_reached, 1, "{result:?}");
         }

@@ -132,6 +132,7 @@ fn bad_arguments_are_refused_by_name() {
         (vec!["--tasks", "z"], "tasks"),
         (vec!["--seeds", "0"], "--seeds"),
         (vec!["--methods", "teleport"], "teleport"),
+        (vec!["--encounter", "sofa"], "sofa"),
     ] {
         let output = Command::new(env!("CARGO_BIN_EXE_eval"))
             .arg("table")
@@ -174,6 +175,60 @@ fn a_run_depends_on_its_seed_only() {
     assert_eq!(ta, tb);
     let (c, _) = run(4);
     assert_ne!(a.mean_position_error_m, c.mean_position_error_m);
+}
+
+#[test]
+fn a_scripted_encounter_goes_on_the_first_leg_of_each_scenario_it_fits() {
+    use eval::record::encounter::Encounter;
+    use protocol::ControllerKind;
+    let options = eval::table::TableOptions {
+        time_limit_s: Some(60.0),
+        ..eval::table::TableOptions::default()
+    };
+    let names = ["task_a", "task_b", "task_c", "task_d", "task_e"];
+    let tasks = || -> Vec<_> { names.iter().map(|t| prepared(t).0).collect() };
+    let furniture_before: Vec<usize> = tasks().iter().map(|p| p.scenario.furniture.len()).collect();
+    let (fitted, left_out) =
+        eval::table::with_encounter(tasks(), Encounter::Furniture, &options).unwrap();
+    assert_eq!(fitted.len() + left_out.len(), 5, "{left_out:?}");
+    assert!(
+        fitted.len() >= 2,
+        "fits on {} of 5 tasks: {left_out:?}",
+        fitted.len()
+    );
+    // The same placement every time: every method and seed meets the same one.
+    let (again, _) = eval::table::with_encounter(tasks(), Encounter::Furniture, &options).unwrap();
+    for (p, q) in fitted.iter().zip(&again) {
+        assert_eq!(p.scenario, q.scenario);
+        let task = p
+            .scenario
+            .name
+            .strip_suffix("-furniture")
+            .expect("named by its kind");
+        let k = names.iter().position(|t| *t == task).unwrap();
+        assert_eq!(p.scenario.furniture.len(), furniture_before[k] + 1);
+    }
+    // The expert, which sees it, goes round it; the path tracker, which follows the floor
+    // plan's path through it, is held short by the collision monitor and relieved.
+    let p = &fitted[0];
+    let piece = p.scenario.furniture.last().unwrap().shape();
+    for method in [ControllerKind::Expert, ControllerKind::PathTracker] {
+        let (r, trace) = eval::table::run_one(p, method, 0, &options, |_| {}).unwrap();
+        // (Task C's glass, which the path tracker's laser does not see, is not this test's.)
+        assert_eq!(r.collisions.furniture, 0, "{method:?}: {r:?}");
+        if method == ControllerKind::Expert {
+            assert_eq!(r.collisions.total(), 0, "{r:?}");
+        }
+        let near = trace
+            .points_m
+            .iter()
+            .any(|&(x, y)| piece.distance(x, y) < 1.0);
+        assert!(near, "{method:?} never came near the furniture: {r:?}");
+        assert!(
+            r.goals_reached >= 1,
+            "{method:?} did not get past it: {r:?}"
+        );
+    }
 }
 
 #[test]

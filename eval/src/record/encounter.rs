@@ -21,6 +21,14 @@
 //!   off its centre line, facing any way, where the passage is wide enough to go round it
 //!   (about 2 m). A robot waiting for a task or broken down stands like this in a real
 //!   fleet; the expert goes round it once it has stood for a moment.
+//! - [`Encounter::Furniture`]: a cabinet, crate, bench or shelf against the floor plan's wall
+//!   beside the path 4–12 m ahead, on a straight stretch, reaching from 0.2 m short of the
+//!   path's centre line to 0.3 m across it, so that a robot keeping to the path would hit it,
+//!   with a passage of at least [`FURNITURE_PASSAGE_M`] left beside it. The floor plan does not have it (no floor
+//!   plan has the furniture), so the drawn path runs through it; the expert goes round it.
+//!   Furniture beside the path is where LPE-Net r6 alone touched things most (20 contacts in
+//!   25 task runs, docs/evaluation.md), and the generated buildings put furniture on the
+//!   robot's route only now and then.
 //!
 //! Everything is drawn from the episode's seed; an encounter that does not fit (a path too
 //! short, a person route through furniture, no walls near enough for a door) is left out.
@@ -34,7 +42,8 @@ use rand::seq::SliceRandom;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
-use sim::scenario::{GlassSpec, PersonSpec, PointSpec, PoseSpec, RouteMode};
+use sim::scenario::{BoxSpec, GlassSpec, PersonSpec, PointSpec, PoseSpec, RouteMode};
+use sim::world::Obstacle;
 use sim::{Scenario, World};
 
 /// One scripted situation on the robot's route.
@@ -45,14 +54,16 @@ pub enum Encounter {
     PersonOncoming,
     GlassDoor,
     RobotParked,
+    Furniture,
 }
 
 impl Encounter {
-    pub const ALL: [Encounter; 4] = [
+    pub const ALL: [Encounter; 5] = [
         Encounter::PersonAhead,
         Encounter::PersonOncoming,
         Encounter::GlassDoor,
         Encounter::RobotParked,
+        Encounter::Furniture,
     ];
 
     #[must_use]
@@ -62,7 +73,22 @@ impl Encounter {
             Encounter::PersonOncoming => "person_oncoming",
             Encounter::GlassDoor => "glass_door",
             Encounter::RobotParked => "robot_parked",
+            Encounter::Furniture => "furniture",
         }
+    }
+}
+
+impl std::str::FromStr for Encounter {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Encounter::ALL
+            .into_iter()
+            .find(|k| k.as_str() == s)
+            .ok_or_else(|| {
+                let names: Vec<&str> = Encounter::ALL.iter().map(|k| k.as_str()).collect();
+                format!("unknown encounter {s:?}; one of {}", names.join(", "))
+            })
     }
 }
 
@@ -86,6 +112,27 @@ const PARKED_CLEARANCE_FROM_M: f64 = 0.3;
 
 /// Widest passage a glass door closes.
 const DOOR_MAX_WIDTH_M: f64 = 3.0;
+
+/// Narrowest passage scripted furniture leaves beside it: the robot's 0.5 m and 0.4 m to
+/// spare, so that going round it takes steering, not squeezing.
+pub const FURNITURE_PASSAGE_M: f64 = 0.9;
+/// How far the furniture's face reaches from the path's centre line, towards its wall
+/// (positive: short of the line) ...
+const FURNITURE_FACE_MAX_M: f64 = 0.2;
+/// ... and at most this far across it.
+const FURNITURE_FACE_MIN_M: f64 = -0.3;
+/// The furniture stands this far off its wall (as the generated buildings' does).
+const FURNITURE_WALL_GAP_M: f64 = 0.05;
+/// Furthest a wall beside the path is looked for.
+const FURNITURE_WALL_MAX_M: f64 = 3.0;
+/// The wall beside the furniture may not come or go by more than this along its length (a
+/// door or a corner there).
+const FURNITURE_WALL_EVEN_M: f64 = 0.15;
+/// The path runs this straight (heading change, radians) from this far before the furniture
+/// to as far past it: not where the robot comes out of a door or round a corner, where the
+/// generated buildings keep furniture away too.
+const FURNITURE_STRAIGHT_RAD: f64 = 0.3;
+const FURNITURE_STRAIGHT_M: f64 = 1.5;
 
 /// A path as points with their arc length.
 struct Route {
@@ -374,8 +421,137 @@ fn place(
                 yaw_rad: (yaw_rad * 100.0).round() / 100.0,
             });
         }
+        Encounter::Furniture => {
+            if length_m < 8.0 {
+                return None;
+            }
+            let s = rng.gen_range(4.0..12.0_f64).min(length_m - 3.0);
+            if s < 4.0 {
+                return None;
+            }
+            let piece = furniture_beside(route, s, planning, world, rng)?;
+            let keep_m = world.config.base.radius_m + 0.3;
+            if piece.shape().distance(start.x_m, start.y_m) < keep_m
+                || piece.shape().distance(goal.0, goal.1) < keep_m
+            {
+                return None;
+            }
+            scenario.furniture.push(piece);
+        }
     }
     Some(())
+}
+
+/// Distance from `(x, y)` along the unit direction `(dx, dy)` to the floor plan's first
+/// occupied (or unknown) cell, within [`FURNITURE_WALL_MAX_M`].
+fn wall_distance_m(planning: &PlanningMap, x: f64, y: f64, dx: f64, dy: f64) -> Option<f64> {
+    let grid = planning.grid();
+    let step = 0.5 * grid.resolution_m();
+    let mut d = 0.0;
+    while d <= FURNITURE_WALL_MAX_M {
+        let (cx, cy) = grid.world_to_cell(x + d * dx, y + d * dy);
+        if grid
+            .get(cx, cy)
+            .is_none_or(|v| classify(v) != CellClass::Free)
+        {
+            return Some(d);
+        }
+        d += step;
+    }
+    None
+}
+
+/// A piece of furniture against the floor plan's wall on a random side of the path at arc
+/// length `s`, aligned with the path there, reaching into it (see [`Encounter::Furniture`]);
+/// `None` where the wall is not straight along it, the passage left would be too narrow, or
+/// it would stand on other furniture or glass.
+fn furniture_beside(
+    route: &Route,
+    s: f64,
+    planning: &PlanningMap,
+    world: &World,
+    rng: &mut ChaCha8Rng,
+) -> Option<BoxSpec> {
+    /// A range of metres to draw from.
+    type Span = (f64, f64);
+    // (length along the wall, height, colour) of a cabinet, crate, bench or shelf.
+    const PIECES: [(Span, Span, [u8; 3]); 4] = [
+        ((0.5, 1.2), (0.9, 1.3), [110, 115, 120]),
+        ((0.4, 0.9), (0.4, 1.0), [200, 120, 40]),
+        ((1.0, 1.8), (0.45, 0.5), [140, 95, 55]),
+        ((0.8, 2.0), (1.2, 1.9), [215, 215, 210]),
+    ];
+    let (len, height, color) = PIECES[rng.gen_range(0..PIECES.len())];
+    let len_m = round_cm(rng.gen_range(len.0..len.1));
+    let height_m = round_cm(rng.gen_range(height.0..height.1));
+    let (x, y, heading) = route.at(s);
+    let reach_m = 0.5 * len_m + FURNITURE_STRAIGHT_M;
+    let mut t = s - reach_m;
+    while t <= s + reach_m {
+        if protocol::normalize_angle(route.at(t).2 - heading).abs() > FURNITURE_STRAIGHT_RAD {
+            return None;
+        }
+        t += 0.25;
+    }
+    let (ux, uy) = (heading.cos(), heading.sin());
+    let side = if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
+    // The normal towards the furniture's wall.
+    let (nx, ny) = (-side * uy, side * ux);
+    // The walls on both sides at the piece's ends and middle.
+    let mut wall = (f64::INFINITY, 0.0_f64);
+    let mut other_m = f64::INFINITY;
+    for t in [-0.5, 0.0, 0.5] {
+        let (px, py) = (x + t * len_m * ux, y + t * len_m * uy);
+        let d = wall_distance_m(planning, px, py, nx, ny)?;
+        wall = (wall.0.min(d), wall.1.max(d));
+        other_m = other_m.min(wall_distance_m(planning, px, py, -nx, -ny)?);
+    }
+    if wall.1 - wall.0 > FURNITURE_WALL_EVEN_M {
+        return None;
+    }
+    // The face's offset from the centre line (towards the wall), within what leaves the
+    // passage and gives the piece a depth of 0.3–1.2 m.
+    let back_m = wall.0 - FURNITURE_WALL_GAP_M;
+    let lo = FURNITURE_FACE_MIN_M
+        .max(FURNITURE_PASSAGE_M - other_m)
+        .max(back_m - 1.2);
+    let hi = FURNITURE_FACE_MAX_M.min(back_m - 0.3);
+    if lo > hi {
+        return None;
+    }
+    let face_m = rng.gen_range(lo..=hi);
+    let depth_m = round_cm(back_m - face_m);
+    let centre_m = back_m - 0.5 * depth_m;
+    let piece = BoxSpec {
+        x_m: round_cm(x + centre_m * nx),
+        y_m: round_cm(y + centre_m * ny),
+        size_x_m: len_m,
+        size_y_m: depth_m,
+        yaw_rad: (heading * 100.0).round() / 100.0,
+        height_m,
+        color,
+    };
+    // Not on other furniture or glass, and the passage beside it clear of both.
+    let stands_free = [-0.4, 0.0, 0.4].iter().all(|&t| {
+        [-0.3, 0.0, 0.3].iter().all(|&w| {
+            let along = t * len_m;
+            let across = centre_m + w * depth_m;
+            let (px, py) = (x + along * ux + across * nx, y + along * uy + across * ny);
+            !matches!(
+                world.disc_overlap(px, py, 0.05, None, false),
+                Some(Obstacle::Furniture(_) | Obstacle::Glass(_))
+            )
+        })
+    });
+    let passage_free = [-0.5, 0.0, 0.5].iter().all(|&t| {
+        let across = back_m - depth_m - 0.5 * FURNITURE_PASSAGE_M;
+        let (px, py) = (
+            x + t * len_m * ux + across * nx,
+            y + t * len_m * uy + across * ny,
+        );
+        world.disc_overlap(px, py, 0.3, None, false).is_none()
+    });
+    (stands_free && passage_free).then_some(piece)
 }
 
 /// A glass pane from wall to wall across the path at arc length `s`: the walls of the floor

@@ -323,7 +323,12 @@ impl RecordOptions {
             h.update(Sha256::digest(g.plan.cells()));
         }
         if self.encounters > 0.0 {
-            h.update(format!("encounters {:?}\n", self.encounters).as_bytes());
+            // The kinds too: a recording with a kind added is other data at the same P.
+            let kinds: Vec<&str> = encounter::Encounter::ALL
+                .iter()
+                .map(|k| k.as_str())
+                .collect();
+            h.update(format!("encounters {:?} {kinds:?}\n", self.encounters).as_bytes());
         }
         if let Some(p) = &self.policy {
             let bytes = std::fs::read(&p.model).map_err(|e| {

@@ -18,9 +18,12 @@ use std::sync::{Mutex, PoisonError};
 
 use planning::IntentionConfig;
 use protocol::ControllerKind;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
 use robot_agent::AgentConfig;
 
 use crate::expert::ExpertConfig;
+use crate::record::encounter::Encounter;
 pub use run::{run_one, Prepared, RunResult, RunTrace};
 
 /// Why a table could not be made.
@@ -223,6 +226,68 @@ pub fn prepare_generated(seed: u64, options: &TableOptions) -> Result<Prepared, 
     })?;
     let label = PathBuf::from("generated").join(&building.scenario.name);
     Prepared::new(&label, building.scenario, building.grid, options)
+}
+
+/// Rounds of placement draws [`with_encounter`] tries per scenario.
+const ENCOUNTER_TRIES: usize = 5;
+
+/// Each of `prepared` with a scripted `kind` encounter on the path from its start to its first
+/// goal (the recorder's, [`crate::record::encounter`]), named `<scenario>-<kind>`: the
+/// situation put on every route of a table instead of waiting for the buildings to have it.
+/// The placement is drawn from the scenario's name, so every method and seed meets the same
+/// one. Scenarios where it does not fit (a short or narrow first leg) are left out; their
+/// names come back second.
+///
+/// # Errors
+/// [`TableError::Setup`] when the simulator refuses a scenario.
+pub fn with_encounter(
+    prepared: Vec<Prepared>,
+    kind: Encounter,
+    options: &TableOptions,
+) -> Result<(Vec<Prepared>, Vec<String>), TableError> {
+    let (mut fitted, mut left_out) = (Vec::new(), Vec::new());
+    for p in prepared {
+        let mut scenario = p.scenario.clone();
+        let Some(goal) = scenario.goals.first() else {
+            left_out.push(scenario.name);
+            continue;
+        };
+        let goal = (goal.x_m, goal.y_m);
+        let start = protocol::Pose2D::new(
+            scenario.start.x_m,
+            scenario.start.y_m,
+            scenario.start.yaw_rad,
+        );
+        let world = sim::World::new(scenario.clone(), p.plan.clone(), sim::SimConfig::default())
+            .map_err(|e| TableError::Setup {
+                what: "simulator",
+                reason: format!("{}: {e}", scenario.name),
+            })?;
+        let seed = scenario.name.bytes().fold(0xE7C0_u64, |h, b| {
+            h.wrapping_mul(31).wrapping_add(u64::from(b))
+        });
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        // More draws than a recording's episode gets: a table has few scenarios to spare.
+        let added = (0..ENCOUNTER_TRIES).any(|_| {
+            crate::record::encounter::add_first_fitting(
+                &mut scenario,
+                &p.planning,
+                &options.intention.planner,
+                &world,
+                start,
+                goal,
+                &[kind],
+                &mut rng,
+            ) == Some(kind)
+        });
+        if added {
+            scenario.name = format!("{}-{}", scenario.name, kind.as_str());
+            fitted.push(Prepared::new(&p.path, scenario, p.plan, options)?);
+        } else {
+            left_out.push(scenario.name);
+        }
+    }
+    Ok((fitted, left_out))
 }
 
 /// What the workers report while a table runs.
