@@ -17,7 +17,9 @@
 # (cores / models - 1 per run), MODELS ("lpe:small lpe:small-spatial dlm:small-spatial"),
 # INIT_DIR (warm start of the first round: <INIT_DIR>/<kind>-<backbone>/checkpoint_best.pt where
 # it exists), LR (1e-3; later rounds, warm-started, use LR_LATER, 3e-4), GEN_FIRST (1000: round
-# r records on buildings GEN_FIRST + (r-1) GEN.., the expert 2000 higher: never the same twice).
+# r records on buildings GEN_FIRST + (r-1) GEN.., the expert 2000 higher: never the same twice),
+# ENCOUNTER_KINDS (the scripted encounters' kinds, comma-separated, e.g. furniture,glass_door;
+# default all five).
 # The small CPU check runs it with tiny budgets (see training/README.md).
 set -euo pipefail
 
@@ -35,6 +37,8 @@ INIT_DIR=${INIT_DIR:-}
 SEED=${SEED:-61}
 DATA=${DATA:-data/round}
 MODELS=${MODELS:-lpe:small lpe:small-spatial dlm:small-spatial}
+ENCOUNTER_KINDS=${ENCOUNTER_KINDS:-}
+kinds=(); [ -n "$ENCOUNTER_KINDS" ] && kinds=(--encounter-kinds "$ENCOUNTER_KINDS")
 ROUNDS=${ROUNDS:-1}
 LR_LATER=${LR_LATER:-3e-4}
 DRIVER=${DRIVER:-$(tr ' ' '\n' <<<"$MODELS" | grep '^lpe:' | head -n 1 || true)}
@@ -69,12 +73,12 @@ round() {
     mkdir -p "$dir"
     log "round $r: recording for $RECORD_MIN min: DAgger ($policy, beta 0.5) and expert, $IMAGE_PX px, $JOBS jobs each"
     "$EVAL" record --policy "$policy" --beta 0.5 --generated "$GEN" --generated-first-seed "$gen_first" \
-        --encounters 1.0 --episode-s 30 --every 2 --noise 0.1 --image-px "$IMAGE_PX" \
+        --encounters 1.0 "${kinds[@]}" --episode-s 30 --every 2 --noise 0.1 --image-px "$IMAGE_PX" \
         --seed "$seed" --jobs "$JOBS" --samples 2000000 --max-minutes "$RECORD_MIN" \
         --out "$dir/dagger" > "$LOGS/r$r-record-dagger.log" 2>&1 &
     local dagger=$!
     "$EVAL" record --generated "$GEN" --generated-first-seed "$((gen_first + 2000))" \
-        --encounters 0.5 --episode-s 60 --every 2 --noise 0.3 --image-px "$IMAGE_PX" \
+        --encounters 0.5 "${kinds[@]}" --episode-s 60 --every 2 --noise 0.3 --image-px "$IMAGE_PX" \
         --seed "$((seed + 1))" --jobs "$JOBS" --samples 2000000 --max-minutes "$RECORD_MIN" \
         --out "$dir/expert" > "$LOGS/r$r-record-expert.log" 2>&1 &
     local expert=$!

@@ -241,9 +241,14 @@ pub struct RecordArgs {
     #[arg(long, default_value_t = 0.2)]
     noise: f64,
     /// Probability that an episode gets a scripted encounter on its first leg: a person
-    /// ahead, a person coming towards the robot or a shut glass door (paper §4.2).
+    /// ahead, a person coming towards the robot or a shut glass door (paper §4.2), a parked
+    /// robot, furniture in the way ...
     #[arg(long, default_value_t = 0.0)]
     encounters: f64,
+    /// ... of these kinds (comma-separated; default all five), tried in a random order, the
+    /// first that fits: `--encounter-kinds furniture` records only furniture in the way.
+    #[arg(long, value_delimiter = ',', requires = "encounters")]
+    encounter_kinds: Vec<Encounter>,
     /// Largest turn-rate offset of a noise pulse in rad/s (the expert's command filter ignores
     /// pushes up to this size, so its labels correct them).
     #[arg(long, default_value_t = 0.4)]
@@ -305,6 +310,11 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
         samples: args.samples,
         noise: args.noise,
         encounters: args.encounters,
+        encounter_kinds: if args.encounter_kinds.is_empty() {
+            Encounter::ALL.to_vec()
+        } else {
+            args.encounter_kinds.clone()
+        },
         noise_peak_radps: args.noise_peak_radps,
         seed: args.seed,
         jobs: args.jobs.unwrap_or_else(|| {

@@ -394,6 +394,48 @@ fn generated_buildings_record_and_evaluation_seeds_are_refused() {
     assert!(std::fs::read_dir(refused.path()).unwrap().next().is_none());
 }
 
+/// `--encounter-kinds`: the episodes with an encounter get only the kinds asked for, the index
+/// lists them, and the kinds are part of the dataset id; no kind, or one twice, is refused.
+#[test]
+fn encounters_come_only_of_the_kinds_asked_for() {
+    use eval::record::encounter::Encounter;
+    let mut o = options(0.0, 2);
+    o.scenarios = vec![scenario("train_office.yaml")];
+    // Furniture fits on fewer first legs than the other kinds (a straight stretch by a wall).
+    o.samples = 500;
+    o.every = 5;
+    o.episode_s = 20.0;
+    o.encounters = 1.0;
+    o.encounter_kinds = vec![Encounter::Furniture];
+    let out = tempfile::tempdir().unwrap();
+    let summary = record(&o, out.path(), &|_| {}).unwrap();
+    let (index, _) = read_all(out.path());
+    assert_eq!(
+        index["encounters"]["kinds"],
+        serde_json::json!(["furniture"])
+    );
+    let episodes = index["encounters"]["episodes"].as_object().unwrap();
+    assert_eq!(
+        episodes.keys().collect::<Vec<_>>(),
+        ["furniture"],
+        "{episodes:?}"
+    );
+    assert!(!episodes["furniture"].as_array().unwrap().is_empty());
+    let all = RecordOptions {
+        encounter_kinds: Encounter::ALL.to_vec(),
+        ..o.clone()
+    };
+    assert_ne!(all.dataset_id().unwrap(), summary.dataset_id);
+    for bad in [vec![], vec![Encounter::Furniture, Encounter::Furniture]] {
+        let refused = RecordOptions {
+            encounter_kinds: bad,
+            ..o.clone()
+        };
+        let err = refused.validate().unwrap_err().to_string();
+        assert!(err.contains("encounter_kinds"), "{err}");
+    }
+}
+
 /// `eval record --record-dir`: every stored episode also leaves its run log, named after the
 /// samples' episode number, which replays through the agent's AMCL exactly as it ran; the
 /// dataset is the same as without logs.

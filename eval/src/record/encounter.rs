@@ -273,7 +273,7 @@ fn person(route: &[(f64, f64)], speed_mps: f64, rng: &mut ChaCha8Rng) -> PersonS
 /// Draws of one kind's placement before the next kind is tried.
 const DRAWS_PER_KIND: usize = 3;
 
-/// Adds one encounter to `scenario` on the planned path from `start` to `goal`: the kinds in a
+/// Adds one encounter to `scenario` on the planned path from `start` to `goal`: `kinds` in a
 /// random order, each drawn up to [`DRAWS_PER_KIND`] times, the first that fits (a short route
 /// or a narrow one rules some out); returns its kind, or `None` when none fits. `world` is the
 /// scenario's world before the change (walls, furniture and glass that routes and doors must
@@ -286,9 +286,10 @@ pub fn add(
     world: &World,
     start: Pose2D,
     goal: (f64, f64),
+    kinds: &[Encounter],
     rng: &mut ChaCha8Rng,
 ) -> Option<Encounter> {
-    let mut kinds = Encounter::ALL;
+    let mut kinds = kinds.to_vec();
     kinds.shuffle(rng);
     add_first_fitting(scenario, planning, planner, world, start, goal, &kinds, rng)
 }

@@ -72,8 +72,11 @@ pub struct RecordOptions {
     /// Probability that an episode carries steering noise.
     pub noise: f64,
     /// Probability that an episode gets a scripted encounter on its first leg ([`encounter`]:
-    /// a person ahead, a person coming towards the robot, or a shut glass door).
+    /// a person ahead or coming towards the robot, a shut glass door, a parked robot,
+    /// furniture in the way) ...
     pub encounters: f64,
+    /// ... of one of these kinds, tried in a random order per episode, the first that fits.
+    pub encounter_kinds: Vec<encounter::Encounter>,
     /// Largest turn-rate offset of a noise pulse. In a noisy episode the expert's
     /// resynchronisation threshold (`ExpertConfig::motion_resync_radps`: it adopts the
     /// measured motion as its own command state when the two differ by more) is raised above
@@ -113,6 +116,7 @@ impl Default for RecordOptions {
             samples: 100_000,
             noise: 0.2,
             encounters: 0.0,
+            encounter_kinds: encounter::Encounter::ALL.to_vec(),
             noise_peak_radps: 0.4,
             seed: 0,
             jobs: 1,
@@ -214,6 +218,15 @@ impl RecordOptions {
                 "encounters",
                 self.encounters.to_string(),
                 "must be in [0, 1]",
+            ));
+        }
+        let kinds: Vec<&str> = self.encounter_kinds.iter().map(|k| k.as_str()).collect();
+        let distinct: std::collections::BTreeSet<_> = kinds.iter().collect();
+        if kinds.is_empty() || distinct.len() < kinds.len() {
+            return Err(invalid(
+                "encounter_kinds",
+                kinds.join(","),
+                "must name at least one kind, each once",
             ));
         }
         if !(self.noise_peak_radps.is_finite()
@@ -324,10 +337,7 @@ impl RecordOptions {
         }
         if self.encounters > 0.0 {
             // The kinds too: a recording with a kind added is other data at the same P.
-            let kinds: Vec<&str> = encounter::Encounter::ALL
-                .iter()
-                .map(|k| k.as_str())
-                .collect();
+            let kinds: Vec<&str> = self.encounter_kinds.iter().map(|k| k.as_str()).collect();
             h.update(format!("encounters {:?} {kinds:?}\n", self.encounters).as_bytes());
         }
         if let Some(p) = &self.policy {
@@ -491,6 +501,7 @@ fn run_episode(
                 &loaded.world,
                 start,
                 goals[0],
+                &options.encounter_kinds,
                 &mut ChaCha8Rng::seed_from_u64(mix(seed ^ 0x0E7C_0DE5)),
             )
         } else {
@@ -696,6 +707,7 @@ pub fn record(
     }
     header["encounters"] = serde_json::json!({
         "probability": options.encounters,
+        "kinds": options.encounter_kinds.iter().map(|k| k.as_str()).collect::<Vec<_>>(),
         "episodes": encounters,
     });
     let shards = writer.finish(&header)?;
