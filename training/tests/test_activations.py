@@ -5,7 +5,8 @@
   size of its grid (rows x columns of square panels plus the label margin and header);
 * a tampered expected.json makes the command stop with an explanation.
 
-Skipped when onnx, onnxruntime, matplotlib or Pillow are missing (no torch needed). Not in CI.
+Skipped when onnx, onnxruntime, matplotlib or Pillow are missing (no torch needed). CI runs it
+(scripts/training-smoke.sh).
 
     .venv/bin/python training/tests/test_activations.py
     .venv/bin/python -m pytest training/tests/test_activations.py      # the same, with pytest

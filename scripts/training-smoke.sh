@@ -1,0 +1,24 @@
+#!/usr/bin/env bash
+# The training path's smoke tests, on the CPU (training/README.md): a tiny recording in the
+# format `eval record` writes -> `python -m training.train` for each kind -> ONNX export with its
+# card -> checked against ONNX Runtime; and the layer-activation figure of the shipped models.
+# Installs PyTorch and the training dependencies into .venv first (scripts/setup.sh made it;
+# about 5 GB, most of it the CUDA libraries PyPI's wheel carries). Not part of the README's
+# test command: CI runs it after the Rust tests.
+#
+#   bash scripts/training-smoke.sh [SECONDS_PER_KIND]     # default 10
+set -euo pipefail
+cd "$(dirname "$0")/.."
+secs=${1:-10}
+PY=.venv/bin/python
+if [ ! -x "$PY" ]; then
+  echo "error: $PY missing: run scripts/setup.sh first" >&2
+  exit 1
+fi
+# The versions these tests last passed with (training/pyproject.toml gives the ranges).
+if ! "$PY" -c 'import torch, onnx, matplotlib, tqdm, PIL' 2>/dev/null; then
+  "$PY" -m pip install --quiet --disable-pip-version-check \
+    "torch==2.15.0" "onnx==1.23.2" "matplotlib==3.11.2" "tqdm==4.70.1" "pillow==13.0.0"
+fi
+"$PY" training/tests/test_smoke.py --seconds "$secs"
+"$PY" training/tests/test_activations.py
