@@ -231,6 +231,21 @@ fn a_scripted_encounter_goes_on_the_first_leg_of_each_scenario_it_fits() {
     }
 }
 
+/// A scenario's name need not be a valid task id (spaces, `+`, 70 characters): the run still
+/// drives (its intentions carry a cleaned-up id; without one the agent rests).
+#[test]
+fn a_scenario_named_anyhow_still_drives() {
+    use protocol::ControllerKind;
+    let (p, mut options) = prepared("behaviour_person_oncoming");
+    options.time_limit_s = Some(8.0);
+    let mut scenario = p.scenario.clone();
+    scenario.name = format!("my building + a person {}", "x".repeat(50));
+    let renamed = eval::table::Prepared::new(&p.path, scenario, p.plan.clone(), &options).unwrap();
+    let (r, _) =
+        eval::table::run_one(&renamed, ControllerKind::DynamicWindow, 0, &options, |_| {}).unwrap();
+    assert!(r.path_length_m > 2.0, "{r:?}");
+}
+
 #[test]
 fn the_glass_door_is_judged_by_contact_and_by_not_reaching_the_goal() {
     use protocol::ControllerKind;

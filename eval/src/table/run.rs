@@ -189,6 +189,29 @@ pub struct RunTrace {
     pub collisions_m: Vec<(f64, f64)>,
 }
 
+/// The task id a run's intentions carry: the scenario's name where it is a valid id, else the
+/// name with every character an id may not hold replaced by `_`, cut to the id length limit.
+/// An intention without a task means "nothing to do" to the agent, which would rest for the
+/// whole run (a scenario named `my building` did).
+fn task_id_of(name: &str) -> Option<TaskId> {
+    let fallback = || {
+        let cleaned: String = name
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.') {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .take(protocol::ids::MAX_ID_LEN)
+            .collect();
+        let cleaned = cleaned.trim_start_matches('.');
+        TaskId::new(if cleaned.is_empty() { "run" } else { cleaned })
+    };
+    TaskId::new(name).or_else(|_| fallback()).ok()
+}
+
 fn setup(what: &'static str) -> impl FnOnce(String) -> TableError {
     move |reason| TableError::Setup { what, reason }
 }
@@ -373,7 +396,7 @@ pub fn run_with(
     let mut pipeline =
         IntentionPlanner::new(Arc::clone(&prepared.planning), options.intention.clone())
             .map_err(|e| setup("intention pipeline")(e.to_string()))?;
-    let task_id = TaskId::new(name.clone()).ok();
+    let task_id = task_id_of(&name);
     // The same pipeline fed the true pose: what the robot should have been told.
     let mut truth_pipeline = if options.audit_intentions {
         Some(
