@@ -443,21 +443,29 @@ fn place(
     Some(())
 }
 
-/// Distance from `(x, y)` along the unit direction `(dx, dy)` to the floor plan's first
-/// occupied (or unknown) cell, within [`FURNITURE_WALL_MAX_M`].
-fn wall_distance_m(planning: &PlanningMap, x: f64, y: f64, dx: f64, dy: f64) -> Option<f64> {
+/// Whether the floor plan's cell at `(x, y)` is occupied or unknown (or off the map).
+fn plan_blocked(planning: &PlanningMap, x: f64, y: f64) -> bool {
     let grid = planning.grid();
-    let step = 0.5 * grid.resolution_m();
+    let (cx, cy) = grid.world_to_cell(x, y);
+    grid.get(cx, cy)
+        .is_none_or(|v| classify(v) != CellClass::Free)
+}
+
+/// Distance from `(x, y)` along the unit direction `(dx, dy)` to the floor plan's first
+/// blocked cell, in half-cell steps, looked for up to about `max_m`.
+fn wall_distance_m(
+    planning: &PlanningMap,
+    (x, y): (f64, f64),
+    (dx, dy): (f64, f64),
+    max_m: f64,
+) -> Option<f64> {
+    let step = 0.5 * planning.grid().resolution_m();
     let mut d = 0.0;
-    while d <= FURNITURE_WALL_MAX_M {
-        let (cx, cy) = grid.world_to_cell(x + d * dx, y + d * dy);
-        if grid
-            .get(cx, cy)
-            .is_none_or(|v| classify(v) != CellClass::Free)
-        {
+    while d <= max_m {
+        d += step;
+        if plan_blocked(planning, x + d * dx, y + d * dy) {
             return Some(d);
         }
-        d += step;
     }
     None
 }
@@ -503,9 +511,13 @@ fn furniture_beside(
     let mut other_m = f64::INFINITY;
     for t in [-0.5, 0.0, 0.5] {
         let (px, py) = (x + t * len_m * ux, y + t * len_m * uy);
-        let d = wall_distance_m(planning, px, py, nx, ny)?;
+        if plan_blocked(planning, px, py) {
+            return None;
+        }
+        let d = wall_distance_m(planning, (px, py), (nx, ny), FURNITURE_WALL_MAX_M)?;
         wall = (wall.0.min(d), wall.1.max(d));
-        other_m = other_m.min(wall_distance_m(planning, px, py, -nx, -ny)?);
+        let other = wall_distance_m(planning, (px, py), (-nx, -ny), FURNITURE_WALL_MAX_M)?;
+        other_m = other_m.min(other);
     }
     if wall.1 - wall.0 > FURNITURE_WALL_EVEN_M {
         return None;
@@ -560,27 +572,11 @@ fn furniture_beside(
 fn door_across(route: &Route, s: f64, planning: &PlanningMap) -> Option<GlassSpec> {
     let (x, y, heading) = route.at(s);
     let (nx, ny) = (-heading.sin(), heading.cos());
-    let grid = planning.grid();
-    let occupied = |px: f64, py: f64| {
-        let (cx, cy) = grid.world_to_cell(px, py);
-        grid.get(cx, cy)
-            .is_none_or(|v| classify(v) != CellClass::Free)
-    };
-    if occupied(x, y) {
+    if plan_blocked(planning, x, y) {
         return None;
     }
-    let step = 0.5 * grid.resolution_m();
-    let reach = |sign: f64| {
-        let mut d = 0.0;
-        while d <= DOOR_MAX_WIDTH_M {
-            d += step;
-            if occupied(x + sign * d * nx, y + sign * d * ny) {
-                return Some(d);
-            }
-        }
-        None
-    };
-    let (left, right) = (reach(1.0)?, reach(-1.0)?);
+    let left = wall_distance_m(planning, (x, y), (nx, ny), DOOR_MAX_WIDTH_M)?;
+    let right = wall_distance_m(planning, (x, y), (-nx, -ny), DOOR_MAX_WIDTH_M)?;
     if left + right > DOOR_MAX_WIDTH_M {
         return None;
     }
