@@ -24,8 +24,9 @@
 //! - [`Encounter::Furniture`]: a cabinet, crate, bench or shelf against the floor plan's wall
 //!   beside the path 4–12 m ahead, on a straight stretch, reaching from 0.2 m short of the
 //!   path's centre line to 0.3 m across it, so that a robot keeping to the path would hit it,
-//!   with a passage of at least [`FURNITURE_PASSAGE_M`] left beside it. The floor plan does not have it (no floor
-//!   plan has the furniture), so the drawn path runs through it; the expert goes round it.
+//!   with a passage of at least [`FURNITURE_PASSAGE_M`] left beside it. The floor plan does
+//!   not have it (no floor plan has the furniture), so the drawn path runs through it; the
+//!   expert goes round it.
 //!   Furniture beside the path is where LPE-Net r6 alone touched things most (20 contacts in
 //!   25 task runs, docs/evaluation.md), and the generated buildings put furniture on the
 //!   robot's route only now and then.
@@ -76,6 +77,12 @@ impl Encounter {
             Encounter::Furniture => "furniture",
         }
     }
+
+    /// The names of `kinds`, in order (as the command line and `index.json` write them).
+    #[must_use]
+    pub fn names(kinds: &[Encounter]) -> Vec<&'static str> {
+        kinds.iter().map(|k| k.as_str()).collect()
+    }
 }
 
 impl std::str::FromStr for Encounter {
@@ -86,8 +93,8 @@ impl std::str::FromStr for Encounter {
             .into_iter()
             .find(|k| k.as_str() == s)
             .ok_or_else(|| {
-                let names: Vec<&str> = Encounter::ALL.iter().map(|k| k.as_str()).collect();
-                format!("unknown encounter {s:?}; one of {}", names.join(", "))
+                let names = Encounter::names(&Encounter::ALL).join(", ");
+                format!("unknown encounter {s:?}; one of {names}")
             })
     }
 }

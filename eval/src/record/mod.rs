@@ -220,7 +220,7 @@ impl RecordOptions {
                 "must be in [0, 1]",
             ));
         }
-        let kinds: Vec<&str> = self.encounter_kinds.iter().map(|k| k.as_str()).collect();
+        let kinds = encounter::Encounter::names(&self.encounter_kinds);
         let distinct: std::collections::BTreeSet<_> = kinds.iter().collect();
         if kinds.is_empty() || distinct.len() < kinds.len() {
             return Err(invalid(
@@ -337,7 +337,7 @@ impl RecordOptions {
         }
         if self.encounters > 0.0 {
             // The kinds too: a recording with a kind added is other data at the same P.
-            let kinds: Vec<&str> = self.encounter_kinds.iter().map(|k| k.as_str()).collect();
+            let kinds = encounter::Encounter::names(&self.encounter_kinds);
             h.update(format!("encounters {:?} {kinds:?}\n", self.encounters).as_bytes());
         }
         if let Some(p) = &self.policy {
@@ -707,7 +707,7 @@ pub fn record(
     }
     header["encounters"] = serde_json::json!({
         "probability": options.encounters,
-        "kinds": options.encounter_kinds.iter().map(|k| k.as_str()).collect::<Vec<_>>(),
+        "kinds": encounter::Encounter::names(&options.encounter_kinds),
         "episodes": encounters,
     });
     let shards = writer.finish(&header)?;
