@@ -87,22 +87,29 @@ pub fn binary(dir: &Path, name: &str) -> Result<PathBuf, LaunchError> {
 
 /// A child process, killed when dropped, whose output lines are echoed to stderr as
 /// `[name] line` and collected for [`Process::wait_line`] until [`Process::stop_collecting`].
+///
+/// It also stops by itself when this process dies without killing it (SIGKILL, a crash): its
+/// stdin is a pipe that only this process holds open, and it is told to stop at the end of it
+/// ([`protocol::shutdown::STOP_ON_STDIN_EOF_ENV`]).
 pub struct Process {
     /// The label of its output lines, e.g. `sim` or `agent robot_1`.
     pub name: String,
     child: Child,
     lines: Option<mpsc::Receiver<String>>,
+    /// Held, never written: its closing is the child's signal that we are gone.
+    _lifeline: Option<std::process::ChildStdin>,
 }
 
 impl Process {
-    /// Starts `command` with its stdout and stderr piped (anything else, such as environment
-    /// variables, is the caller's).
+    /// Starts `command` with its stdout and stderr piped and its stdin the lifeline (anything
+    /// else, such as environment variables, is the caller's).
     ///
     /// # Errors
     /// [`LaunchError::Spawn`] when the process cannot start.
     pub fn spawn(name: &str, mut command: Command) -> Result<Self, LaunchError> {
         let mut child = command
-            .stdin(Stdio::null())
+            .env(protocol::shutdown::STOP_ON_STDIN_EOF_ENV, "1")
+            .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .spawn()
@@ -136,10 +143,12 @@ impl Process {
                 }
             });
         }
+        let lifeline = child.stdin.take();
         Ok(Self {
             name: name.to_string(),
             child,
             lines: Some(rx),
+            _lifeline: lifeline,
         })
     }
 
@@ -480,11 +489,14 @@ impl Robots {
         let cmd = agent_command(
             &self.agent_bin,
             &self.spec,
-            &robot.id,
-            pose,
-            controller,
-            model,
-            restarts,
+            &self.roster.zenoh,
+            &AgentStart {
+                id: &robot.id,
+                pose,
+                controller,
+                model,
+                restarts,
+            },
         );
         let mut agent = Process::spawn(&format!("agent {}", robot.id), cmd)?;
         agent.stop_collecting();
@@ -559,16 +571,35 @@ fn read_roster(sim: &mut Process, timeout: Duration) -> Result<Roster, LaunchErr
     }
 }
 
-/// The command of a robot's agent, started for the first time when `restarts` is 0.
+/// One start of one robot's agent: the first when `restarts` is 0.
+#[derive(Debug, Clone, Copy)]
+struct AgentStart<'a> {
+    id: &'a RobotId,
+    pose: Pose2D,
+    controller: ControllerKind,
+    model: Option<&'a Path>,
+    restarts: u32,
+}
+
+/// The command of a robot's agent. It
+/// connects to the service's endpoints and to the simulator's (`sim_endpoints`, from the
+/// roster): Zenoh reconnects configured endpoints when a link drops, and a link to a peer
+/// met by gossip stays lost. Zenoh 1.10's TLS links do drop now and then under traffic both
+/// ways (eclipse-zenoh/zenoh#2557: "TX task failed: handshake not complete"), and the lost
+/// link between a base and its agent used to leave that robot without sensors for good.
 fn agent_command(
     bin: &Path,
     spec: &RobotsSpec,
-    id: &RobotId,
-    pose: Pose2D,
-    controller: ControllerKind,
-    model: Option<&Path>,
-    restarts: u32,
+    sim_endpoints: &[String],
+    start: &AgentStart<'_>,
 ) -> Command {
+    let AgentStart {
+        id,
+        pose,
+        controller,
+        model,
+        restarts,
+    } = *start;
     let mut cmd = Command::new(bin);
     cmd.arg("--robot-id")
         .arg(id.as_str())
@@ -585,7 +616,7 @@ fn agent_command(
     if let Some(model) = model {
         cmd.arg("--model").arg(model);
     }
-    for e in &spec.connect {
+    for e in spec.connect.iter().chain(sim_endpoints) {
         cmd.arg("--connect").arg(e);
     }
     if let Some(dir) = &spec.record_dir {
@@ -702,11 +733,14 @@ mod tests {
         let cmd = agent_command(
             Path::new("robot-agent"),
             &s,
-            &RobotId::new("robot_2").unwrap(),
-            pose,
-            ControllerKind::Lpe,
-            Some(Path::new("/m/lpe.onnx")),
-            0,
+            &["tcp/127.0.0.1:40001".to_string()],
+            &AgentStart {
+                id: &RobotId::new("robot_2").unwrap(),
+                pose,
+                controller: ControllerKind::Lpe,
+                model: Some(Path::new("/m/lpe.onnx")),
+                restarts: 0,
+            },
         );
         let args = args_of(&cmd);
         let at = |flag: &str| flag_value(&args, flag);
@@ -719,7 +753,14 @@ mod tests {
         assert_eq!(at("--controller"), "lpe");
         assert_eq!(at("--model"), "/m/lpe.onnx");
         assert_eq!(at("--map"), "junctions");
-        assert_eq!(at("--connect"), "tcp/127.0.0.1:7447");
+        // The service first, then the simulator: both configured, so both are reconnected.
+        let connects: Vec<&String> = args
+            .iter()
+            .zip(args.iter().skip(1))
+            .filter(|(flag, _)| *flag == "--connect")
+            .map(|(_, value)| value)
+            .collect();
+        assert_eq!(connects, ["tcp/127.0.0.1:7447", "tcp/127.0.0.1:40001"]);
         assert!(args.iter().any(|a| a == "--no-multicast"));
         assert!(!args.iter().any(|a| a.starts_with("--zenoh-tls")));
 
@@ -729,11 +770,14 @@ mod tests {
         let cmd = agent_command(
             Path::new("robot-agent"),
             &secured,
-            &RobotId::new("robot_2").unwrap(),
-            pose,
-            ControllerKind::Lpe,
-            None,
-            0,
+            &[],
+            &AgentStart {
+                id: &RobotId::new("robot_2").unwrap(),
+                pose,
+                controller: ControllerKind::Lpe,
+                model: None,
+                restarts: 0,
+            },
         );
         let args = args_of(&cmd);
         let at = |flag: &str| flag_value(&args, flag);
@@ -750,11 +794,14 @@ mod tests {
             let cmd = agent_command(
                 Path::new("robot-agent"),
                 &recording,
-                &RobotId::new("robot_2").unwrap(),
-                pose,
-                ControllerKind::DynamicWindow,
-                None,
-                restarts,
+                &[],
+                &AgentStart {
+                    id: &RobotId::new("robot_2").unwrap(),
+                    pose,
+                    controller: ControllerKind::DynamicWindow,
+                    model: None,
+                    restarts,
+                },
             );
             flag_value(&args_of(&cmd), "--record")
         };

@@ -197,18 +197,13 @@ pub fn run(cli: Cli) -> Result<()> {
             };
             driver_config.validate()?;
             // Where the robots stand, for whoever starts their agents: the roster, one JSON line
-            // on stdout (the launcher reads it with `Roster::parse_line`); logs for people.
-            let roster = crate::roster::Roster::of_world(&world);
+            // on stdout once the session is open (the launcher reads it with
+            // `Roster::parse_line`); logs for people.
+            let mut roster = crate::roster::Roster::of_world(&world);
             // After the roster: parked robots get no agent, and they stand still.
             world.add_parked_robots()?;
             for r in &roster.robots {
                 tracing::info!(robot = %r.id, "starts at {:.3},{:.3},{:.4}", r.x_m, r.y_m, r.yaw_rad);
-            }
-            {
-                use std::io::Write as _;
-                let mut stdout = std::io::stdout().lock();
-                writeln!(stdout, "{}", roster.to_line()?)?;
-                stdout.flush()?;
             }
             let recorder = match &record {
                 Some(path) => {
@@ -234,6 +229,13 @@ pub fn run(cli: Cli) -> Result<()> {
                 // Multicast scouting only when asked for: two demos on one host must not drive
                 // each other's robots.
                 let session = zenoh.open().await?;
+                roster.zenoh = protocol::zenoh_io::locators(&session).await;
+                {
+                    use std::io::Write as _;
+                    let mut stdout = std::io::stdout().lock();
+                    writeln!(stdout, "{}", roster.to_line()?)?;
+                    stdout.flush()?;
+                }
                 driver::run_recording(
                     &session,
                     world,

@@ -1,10 +1,10 @@
 //! The robot roster: which robots `sim run` drives and where each one starts.
 //!
-//! `sim run` prints the roster as one JSON line on stdout before it starts driving, and that
-//! line is its only stdout output (logs go to stderr):
+//! `sim run` prints the roster as one JSON line on stdout once its Zenoh session is open and
+//! before it starts driving, and that line is its only stdout output (logs go to stderr):
 //!
 //! ```text
-//! {"robots":[{"id":"robot_1","x_m":3.0,"y_m":4.0,"yaw_rad":0.0},{"id":"robot_2",…}]}
+//! {"robots":[{"id":"robot_1","x_m":3.0,"y_m":4.0,"yaw_rad":0.0},{"id":"robot_2",…}],"zenoh":["tcp/127.0.0.1:41235"]}
 //! ```
 //!
 //! Poses are the robots' ground-truth start poses in the map frame (metres, radians), written
@@ -40,6 +40,11 @@ impl RosterRobot {
 #[serde(deny_unknown_fields)]
 pub struct Roster {
     pub robots: Vec<RosterRobot>,
+    /// The simulator's own Zenoh endpoints (where it listens): the agents connect to them
+    /// directly, so that Zenoh reconnects a lost link between a robot's base and its agent
+    /// (it does so only for configured endpoints, not for peers met by gossip).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub zenoh: Vec<String>,
 }
 
 /// A line that is not a valid roster.
@@ -70,7 +75,10 @@ impl Roster {
                 })
             })
             .collect();
-        Self { robots }
+        Self {
+            robots,
+            zenoh: Vec::new(),
+        }
     }
 
     /// The roster as one JSON line (no newline).
@@ -130,6 +138,7 @@ mod tests {
                 y_m: -1.0 / 3.0,
                 yaw_rad: std::f64::consts::PI,
             }],
+            zenoh: vec!["tls/127.0.0.1:40123".into()],
         };
         let line = roster.to_line().unwrap();
         assert!(!line.contains('\n'));

@@ -19,6 +19,11 @@ use serde_json::Value;
 /// The repository root (for the scenarios and floor plans).
 pub use test_support::repo_root;
 
+/// The child processes' log filter unless `RUST_LOG` is set: a failing test prints its
+/// children's output, and Zenoh's link openings and closings are what tell a lost connection
+/// from a stalled process.
+const CHILD_LOG: &str = "info,zenoh_transport=debug,zenoh::net::runtime::orchestrator=debug";
+
 /// A harness failure, with what was being done.
 #[derive(Debug, thiserror::Error)]
 pub enum HarnessError {
@@ -114,7 +119,7 @@ impl Service {
         cmd.args(&args)
             .env(
                 "RUST_LOG",
-                std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()),
+                std::env::var("RUST_LOG").unwrap_or_else(|_| CHILD_LOG.into()),
             )
             .env_remove("RUST_BACKTRACE");
         let mut proc = Process::spawn("service", cmd)?;
@@ -160,7 +165,7 @@ impl Service {
             .arg(robots.to_string())
             .env(
                 "RUST_LOG",
-                std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()),
+                std::env::var("RUST_LOG").unwrap_or_else(|_| CHILD_LOG.into()),
             )
             .env_remove("RUST_BACKTRACE");
         if std::env::var_os("FLEET_MODELS_DIR").is_none() {
@@ -455,7 +460,7 @@ pub fn start_worker(command: Command, id: &str, zenoh: &str, extra: &[&str]) -> 
         .args(extra)
         .env(
             "RUST_LOG",
-            std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()),
+            std::env::var("RUST_LOG").unwrap_or_else(|_| CHILD_LOG.into()),
         );
     let mut proc = Process::spawn(&format!("worker {id}"), cmd)?;
     proc.wait_line(Duration::from_secs(60), |l| {

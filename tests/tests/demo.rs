@@ -157,3 +157,62 @@ fn a_secured_demo_drives_over_mutual_tls_with_access_control() {
     )
     .unwrap();
 }
+
+/// A demo killed outright (SIGKILL: no chance to stop its children) does not leave its
+/// simulator and agents running: they see their stdin close and stop by themselves. They used
+/// to run on, retrying the dead service's Zenoh endpoint, ready to join whatever listened on
+/// that port next with a second `robot_1`.
+#[test]
+fn a_demo_killed_outright_leaves_no_simulator_or_agent_behind() {
+    let bins = bin_dir().unwrap();
+    let data = tempfile::tempdir().unwrap();
+    let scenario = repo_root().join("sim/scenarios/task_a.yaml");
+    let mut demo = Service::start_demo(
+        &bins,
+        &data.path().join("data"),
+        &scenario,
+        2,
+        TOKEN,
+        None,
+        &[],
+    )
+    .unwrap();
+    demo.wait_for("/api/v1/robots", Duration::from_secs(90), |v| {
+        let robots = v.as_array()?;
+        (robots.len() == 2 && robots.iter().all(|r| r["online"] == true)).then_some(())
+    })
+    .unwrap();
+    let demo_pid = demo.proc.pid();
+    let sim = child_pids(demo_pid, &["run", "--scenario"]);
+    let agents = [
+        agent_pid(&demo, "robot_1").unwrap(),
+        agent_pid(&demo, "robot_2").unwrap(),
+    ];
+    assert_eq!(sim.len(), 1, "the demo runs one simulator: {sim:?}");
+    let children: Vec<u32> = sim.iter().copied().chain(agents).collect();
+
+    demo.proc.kill();
+    let deadline = std::time::Instant::now() + Duration::from_secs(20);
+    let running = || -> Vec<u32> {
+        children
+            .iter()
+            .copied()
+            .filter(|pid| {
+                // Gone, or a zombie waiting for whoever adopted it to reap it: not running.
+                std::fs::read_to_string(format!("/proc/{pid}/stat")).is_ok_and(|stat| {
+                    stat.rsplit_once(')')
+                        .and_then(|(_, rest)| rest.split_whitespace().next())
+                        .is_some_and(|state| state != "Z" && state != "X")
+                })
+            })
+            .collect()
+    };
+    while !running().is_empty() && std::time::Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    assert!(
+        running().is_empty(),
+        "still running 20 s after the demo was killed: {:?} of {children:?}",
+        running()
+    );
+}
