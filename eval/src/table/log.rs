@@ -26,17 +26,20 @@ pub struct RecordSettings {
 /// The log file of one run in `dir`.
 #[must_use]
 pub fn log_path(dir: &Path, scenario: &str, method: ControllerKind, seed: u64) -> PathBuf {
-    let safe: String = scenario
-        .chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.') {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect();
+    let safe: String = safe_chars(scenario).collect();
     dir.join(format!("{safe}-{method}-seed{seed}.mcap"))
+}
+
+/// A scenario's name with every character but ASCII letters, digits, `_`, `-` and `.` turned
+/// into `_`: what both a file name and a task id may hold.
+pub(crate) fn safe_chars(name: &str) -> impl Iterator<Item = char> + '_ {
+    name.chars().map(|c| {
+        if c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.') {
+            c
+        } else {
+            '_'
+        }
+    })
 }
 
 /// The writer of one run's log.

@@ -30,7 +30,7 @@ use sim::scenario::Role;
 use sim::{Command, Scenario, SimConfig, World};
 
 use super::judge::{self, Collisions, GoalDistance};
-use super::log::RunRecorder;
+use super::log::{safe_chars, RunRecorder};
 use super::{TableError, TableOptions};
 use crate::expert::{Expert, SharedTruth, TruthView};
 use crate::metrics::{self, TrajectorySample};
@@ -195,17 +195,7 @@ pub struct RunTrace {
 /// whole run (a scenario named `my building` did).
 fn task_id_of(name: &str) -> Option<TaskId> {
     let fallback = || {
-        let cleaned: String = name
-            .chars()
-            .map(|c| {
-                if c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.') {
-                    c
-                } else {
-                    '_'
-                }
-            })
-            .take(protocol::ids::MAX_ID_LEN)
-            .collect();
+        let cleaned: String = safe_chars(name).take(protocol::ids::MAX_ID_LEN).collect();
         let cleaned = cleaned.trim_start_matches('.');
         TaskId::new(if cleaned.is_empty() { "run" } else { cleaned })
     };
