@@ -104,8 +104,9 @@ async fn stdin_closed() {
     }
 }
 
-/// Completes on Ctrl-C or SIGTERM (or the end of stdin, see [`StopSignal::wait`]); a handler that cannot be installed is logged and the
-/// other one still waited for (a process that cannot be asked to stop should still run).
+/// Completes on Ctrl-C or SIGTERM (or the end of stdin, see [`StopSignal::wait`]); a handler that
+/// cannot be installed is logged and the other one still waited for (a process that cannot be asked
+/// to stop should still run).
 pub async fn stop_requested() {
     match StopSignal::install() {
         Ok(signal) => {

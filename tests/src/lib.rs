@@ -24,6 +24,11 @@ pub use test_support::repo_root;
 /// from a stalled process.
 const CHILD_LOG: &str = "info,zenoh_transport=debug,zenoh::net::runtime::orchestrator=debug";
 
+/// `RUST_LOG`, else [`CHILD_LOG`].
+fn child_log() -> String {
+    std::env::var("RUST_LOG").unwrap_or_else(|_| CHILD_LOG.into())
+}
+
 /// A harness failure, with what was being done.
 #[derive(Debug, thiserror::Error)]
 pub enum HarnessError {
@@ -117,10 +122,7 @@ impl Service {
         ];
         let mut cmd = Command::new(bins.join("planner-service"));
         cmd.args(&args)
-            .env(
-                "RUST_LOG",
-                std::env::var("RUST_LOG").unwrap_or_else(|_| CHILD_LOG.into()),
-            )
+            .env("RUST_LOG", child_log())
             .env_remove("RUST_BACKTRACE");
         let mut proc = Process::spawn("service", cmd)?;
         let url = proc.wait_line(Duration::from_secs(60), |l| {
@@ -163,10 +165,7 @@ impl Service {
             .arg(scenario)
             .arg("--robots")
             .arg(robots.to_string())
-            .env(
-                "RUST_LOG",
-                std::env::var("RUST_LOG").unwrap_or_else(|_| CHILD_LOG.into()),
-            )
+            .env("RUST_LOG", child_log())
             .env_remove("RUST_BACKTRACE");
         if std::env::var_os("FLEET_MODELS_DIR").is_none() {
             // The demo's robots drive with LPE-Net; the tests run outside the repository root.
@@ -458,10 +457,7 @@ pub fn start_worker(command: Command, id: &str, zenoh: &str, extra: &[&str]) -> 
     cmd.arg("worker")
         .args(["--worker-id", id, "--zenoh-connect", zenoh])
         .args(extra)
-        .env(
-            "RUST_LOG",
-            std::env::var("RUST_LOG").unwrap_or_else(|_| CHILD_LOG.into()),
-        );
+        .env("RUST_LOG", child_log());
     let mut proc = Process::spawn(&format!("worker {id}"), cmd)?;
     proc.wait_line(Duration::from_secs(60), |l| {
         l.starts_with(planner_service::cli::WORKER_READY_PREFIX)
