@@ -53,6 +53,10 @@ DEFAULT_MAX_SPEED_MPS = 0.7
 DEFAULT_MAX_TURN_RADPS = 1.2
 # The planner's default LPE rendering (protocol LpeParams::default()), only for recordings made
 # before `eval record` wrote the rendering into index.json (`lpe_rendering`).
+# The DLM a recording made before `eval record` wrote `dlm_params` was labelled with (planning
+# DlmParams::default(): the curvature measure, what DLM-Net r1 was trained on).
+DEFAULT_DLM_MEASURE = "curvature"
+
 DEFAULT_LPE_RENDERING = {
     "size_px": 224,
     "metres_per_px": 0.05,
@@ -86,6 +90,8 @@ class Pool:
         self.lpe_rendering = dict(first.index.get("lpe_rendering", DEFAULT_LPE_RENDERING))
         self.limits_from_index = "max_speed_mps" in first.index and "max_turn_radps" in first.index
         self.rendering_from_index = "lpe_rendering" in first.index
+        self.dlm_params = dict(first.index.get("dlm_params", {"measure": DEFAULT_DLM_MEASURE}))
+        self.dlm_measure = self.dlm_params.get("measure", DEFAULT_DLM_MEASURE)
         for ds in self.sets[1:]:
             ix = ds.index
             other = (
@@ -96,6 +102,12 @@ class Pool:
                 dict(ix.get("lpe_rendering", DEFAULT_LPE_RENDERING)),
             )
             mine = (self.camera_px, self.lpe_px, self.max_speed_mps, self.max_turn_radps, self.lpe_rendering)
+            theirs = dict(ix.get("dlm_params", {"measure": DEFAULT_DLM_MEASURE}))
+            if theirs.get("measure", DEFAULT_DLM_MEASURE) != self.dlm_measure:
+                raise ValueError(
+                    f"{ds.root} has DLM labels of the {theirs.get('measure', DEFAULT_DLM_MEASURE)} measure, "
+                    f"{first.root} of the {self.dlm_measure} measure; train on recordings labelled alike"
+                )
             if other != mine:
                 raise ValueError(
                     f"{ds.root} differs from {first.root} in image size, limits or LPE rendering: "

@@ -284,6 +284,7 @@ def main(argv=None) -> int:
         "max_turn_radps": pool.max_turn_radps,
         "dataset_id": pool.dataset_id,
         "lpe_rendering": pool.lpe_rendering,
+        "dlm_params": pool.dlm_params,
     }
     deviations = recipe.deviations(r, config, camera_px, lpe_px, [ds.index for ds in pool.sets], args.minutes)
     if args.init:

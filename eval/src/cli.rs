@@ -21,6 +21,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
+use planning::DlmMeasure;
 use robot_agent::{AgentConfig, ControllerKind};
 
 use crate::amcl_accuracy::{self, AccuracyOptions, TaskAccuracy};
@@ -213,6 +214,11 @@ pub struct TableArgs {
     /// does not fit are left out. With `--generated N`: the situation on N buildings.
     #[arg(long)]
     encounter: Option<Encounter>,
+    /// How the planner derives the DLM (`curvature` or `heading`, planning `DlmMeasure`);
+    /// default: what the DLM-Net's card says it was trained on (`dlm_measure`; a card
+    /// without one: curvature). A value that contradicts the card is refused.
+    #[arg(long)]
+    dlm_measure: Option<DlmMeasure>,
 }
 
 /// Arguments of `eval record`.
@@ -292,9 +298,50 @@ pub struct RecordArgs {
     /// Also record the camera (JPEG) in the run logs.
     #[arg(long, requires = "record_dir")]
     record_camera: bool,
+    /// How the planner derives the DLM labels (`curvature` or `heading`, planning
+    /// `DlmMeasure`); index.json records the `[dlm]` parameters as `dlm_params`.
+    #[arg(long, default_value = "curvature")]
+    dlm_measure: DlmMeasure,
     /// Output folder: index.json and shard_NNNNN/*.npy (training/DATASET.md).
     #[arg(long)]
     out: PathBuf,
+}
+
+/// The DLM measure a table runs with: the one asked for, else the DLM-Net card's
+/// (`<models>/dlm.card.json`, key `dlm_measure`; absent: curvature, what DLM-Net r1 was
+/// trained on) when the table runs DLM-Net, else curvature.
+fn dlm_measure_for(
+    asked: Option<DlmMeasure>,
+    runs_dlm_net: bool,
+    models_dir: &std::path::Path,
+) -> anyhow::Result<DlmMeasure> {
+    if !runs_dlm_net {
+        return Ok(asked.unwrap_or_default());
+    }
+    let card_path = models_dir.join("dlm.card.json");
+    let trained_on = match std::fs::read_to_string(&card_path) {
+        Ok(text) => {
+            let card: serde_json::Value = serde_json::from_str(&text)
+                .with_context(|| format!("reading {}", card_path.display()))?;
+            match card.get("dlm_measure").and_then(serde_json::Value::as_str) {
+                Some(name) => name
+                    .parse::<DlmMeasure>()
+                    .map_err(|e| anyhow::anyhow!("{}: dlm_measure: {e}", card_path.display()))?,
+                None => DlmMeasure::Curvature,
+            }
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => DlmMeasure::Curvature,
+        Err(e) => return Err(e).with_context(|| format!("reading {}", card_path.display())),
+    };
+    match asked {
+        Some(a) if a != trained_on => anyhow::bail!(
+            "--dlm-measure {} but {} says DLM-Net was trained on the {} DLM",
+            a.as_str(),
+            card_path.display(),
+            trained_on.as_str()
+        ),
+        _ => Ok(trained_on),
+    }
 }
 
 fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
@@ -330,10 +377,14 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
             .map(|model| crate::record::Policy::load(model, args.beta))
             .transpose()?,
         max_wall_s: args.max_minutes.map(|m| m * 60.0),
-        run: TableOptions {
-            agent: read_agent_config(args.config.as_deref())?,
-            record: record_settings(args.record_dir.as_deref(), args.record_camera),
-            ..TableOptions::default()
+        run: {
+            let mut run = TableOptions {
+                agent: read_agent_config(args.config.as_deref())?,
+                record: record_settings(args.record_dir.as_deref(), args.record_camera),
+                ..TableOptions::default()
+            };
+            run.intention.dlm.measure = args.dlm_measure;
+            run
         },
         command: std::env::args().collect::<Vec<_>>().join(" "),
     };
@@ -463,6 +514,11 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
         intention: {
             let mut intention = options.intention;
             intention.reuse.enabled = args.path_reuse;
+            intention.dlm.measure = dlm_measure_for(
+                args.dlm_measure,
+                methods.contains(&ControllerKind::Dlm),
+                &options.models_dir,
+            )?;
             intention
         },
         ..options
@@ -712,6 +768,52 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_table_runs_the_dlm_its_dlm_net_was_trained_on() {
+        let dir = tempfile::tempdir().unwrap();
+        // No card, or a card without the key: DLM-Net r1's curvature.
+        assert_eq!(
+            dlm_measure_for(None, true, dir.path()).unwrap(),
+            DlmMeasure::Curvature
+        );
+        std::fs::write(dir.path().join("dlm.card.json"), r#"{"kind": "dlm"}"#).unwrap();
+        assert_eq!(
+            dlm_measure_for(None, true, dir.path()).unwrap(),
+            DlmMeasure::Curvature
+        );
+        std::fs::write(
+            dir.path().join("dlm.card.json"),
+            r#"{"kind": "dlm", "dlm_measure": "heading"}"#,
+        )
+        .unwrap();
+        assert_eq!(
+            dlm_measure_for(None, true, dir.path()).unwrap(),
+            DlmMeasure::Heading
+        );
+        assert_eq!(
+            dlm_measure_for(Some(DlmMeasure::Heading), true, dir.path()).unwrap(),
+            DlmMeasure::Heading
+        );
+        let err = dlm_measure_for(Some(DlmMeasure::Curvature), true, dir.path()).unwrap_err();
+        assert!(
+            err.to_string().contains("--dlm-measure curvature")
+                && err.to_string().contains("heading"),
+            "{err}"
+        );
+        // Without DLM-Net in the table the card does not matter.
+        assert_eq!(
+            dlm_measure_for(Some(DlmMeasure::Curvature), false, dir.path()).unwrap(),
+            DlmMeasure::Curvature
+        );
+        std::fs::write(
+            dir.path().join("dlm.card.json"),
+            r#"{"dlm_measure": "sideways"}"#,
+        )
+        .unwrap();
+        let err = dlm_measure_for(None, true, dir.path()).unwrap_err();
+        assert!(err.to_string().contains("sideways"), "{err}");
+    }
 
     #[test]
     fn record_and_log_flags() {

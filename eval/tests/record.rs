@@ -109,6 +109,9 @@ fn a_short_recording_has_the_documented_files_and_values() {
     let rendering: protocol::LpeParams =
         serde_json::from_value(index["lpe_rendering"].clone()).unwrap();
     assert_eq!(rendering, protocol::LpeParams::default());
+    // And how the DLM labels were derived, for the card of a DLM-Net trained on them.
+    let dlm: planning::DlmParams = serde_json::from_value(index["dlm_params"].clone()).unwrap();
+    assert_eq!(dlm, planning::DlmParams::default());
     assert!(index["policy"].is_null());
     assert_eq!(index["dataset_id"], summary.dataset_id.as_str());
     assert_eq!(index["scenarios"][0]["name"], "train_lab");
@@ -202,6 +205,18 @@ fn a_short_recording_has_the_documented_files_and_values() {
     assert!(first >= 5);
     assert_eq!(label[..2 * first], clean_label[..2 * first]);
     assert_ne!(label, clean_label);
+
+    // The heading DLM labels the same states (the expert never reads the DLM), and is
+    // another dataset.
+    let mut heading = options(1.0, 2);
+    heading.run.intention.dlm = planning::DlmParams::heading();
+    assert_ne!(heading.dataset_id().unwrap(), summary.dataset_id);
+    let heading_dir = tempfile::tempdir().unwrap();
+    record(&heading, heading_dir.path(), &|_| {}).unwrap();
+    let (heading_index, heading_fields) = read_all(heading_dir.path());
+    assert_eq!(heading_index["dlm_params"]["measure"], "heading");
+    assert_eq!(heading_fields["label"], fields["label"]);
+    assert_eq!(heading_fields["camera"], fields["camera"]);
 }
 
 #[test]

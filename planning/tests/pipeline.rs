@@ -6,7 +6,9 @@
 use std::sync::Arc;
 
 use planning::sample::sample_pairs;
-use planning::{Answer, Goal, GoalProgress, IntentionConfig, IntentionPlanner, PlanningMap};
+use planning::{
+    Answer, DlmParams, Goal, GoalProgress, IntentionConfig, IntentionPlanner, PlanningMap,
+};
 use protocol::{Dlm, Header, MapName, MapRef, Pose2D, PoseEstimate, TaskId};
 
 fn estimate(pose: Pose2D, seq: u64) -> PoseEstimate {
@@ -153,22 +155,45 @@ fn along(path: &[Pose2D], mut d_m: f64) -> Pose2D {
     *path.last().unwrap()
 }
 
-#[test]
-fn a_kept_plan_answers_like_a_new_search_while_the_robot_follows_it() {
-    let fresh_config = IntentionConfig::default();
-    let mut reuse_config = IntentionConfig::default();
+/// What one drive of the test's six depot routes measured.
+struct Agreement {
+    cycles: u32,
+    same_dlm: u32,
+    same_reference: u32,
+    reused: u32,
+    /// Per cycle, the share of the LPE image's pixels that differ between the two answers.
+    lpe_differs: Vec<f64>,
+}
+
+impl Agreement {
+    fn same(&self) -> f64 {
+        f64::from(self.same_dlm) / f64::from(self.cycles)
+    }
+
+    fn repeatable(&self) -> f64 {
+        f64::from(self.same_reference) / f64::from(self.cycles)
+    }
+}
+
+/// Drives six depot routes with path reuse and, at every cycle, answers the same pose with a
+/// new search too (and a new search from other jitter, the reference's own repeatability).
+fn kept_against_new(dlm: DlmParams) -> Agreement {
+    let fresh_config = IntentionConfig {
+        dlm,
+        ..IntentionConfig::default()
+    };
+    let mut reuse_config = fresh_config.clone();
     reuse_config.reuse.enabled = true;
     let map =
         Arc::new(PlanningMap::new(test_support::nav2_map("depot"), &fresh_config.planner).unwrap());
     let pairs = sample_pairs(&map, 6, 23, 6.0, "depot").unwrap();
-    let mut fresh = IntentionPlanner::new(Arc::clone(&map), fresh_config).unwrap();
+    let mut fresh = IntentionPlanner::new(Arc::clone(&map), fresh_config.clone()).unwrap();
     let mut kept = IntentionPlanner::new(Arc::clone(&map), reuse_config).unwrap();
     // The reference's own repeatability: a second new search every cycle from the same true
     // pose with other jitter of the same size.
-    let mut other = IntentionPlanner::new(Arc::clone(&map), IntentionConfig::default()).unwrap();
-    let (mut cycles, mut same_dlm, mut reused, mut longer) = (0_u32, 0_u32, 0_u32, 0_u32);
+    let mut other = IntentionPlanner::new(Arc::clone(&map), fresh_config.clone()).unwrap();
+    let (mut cycles, mut same_dlm, mut reused) = (0_u32, 0_u32, 0_u32);
     let mut same_reference = 0_u32;
-    // Per cycle, the share of the LPE image's pixels that differ between the two answers.
     let mut lpe_differs: Vec<f64> = Vec::new();
     for (k, (start, end)) in pairs.iter().enumerate() {
         let goals = [Goal::at(end.x_m, end.y_m)];
@@ -214,15 +239,38 @@ fn a_kept_plan_answers_like_a_new_search_while_the_robot_follows_it() {
                 b.path[0].distance_m(&reported) < 1e-9,
                 "the path starts at the robot"
             );
-            // How much longer the kept route is than a new search from here (a search may find
-            // a shortcut that only shows from further along; max_cycles bounds how long).
-            longer += u32::from(b.length_m > 1.2 * a.length_m + 0.1);
+            // A search may find a shortcut that only shows from further along; max_cycles
+            // bounds how long a kept route stays this much longer.
+            assert!(
+                b.length_m <= 2.0 * a.length_m + 1.0,
+                "kept route {:.1} m against a new search's {:.1} m",
+                b.length_m,
+                a.length_m
+            );
             // 0.5 m/s at 10 Hz along the path the robot was sent.
             robot = along(&b.path, 0.05);
         }
     }
+    Agreement {
+        cycles,
+        same_dlm,
+        same_reference,
+        reused,
+        lpe_differs,
+    }
+}
+
+#[test]
+fn a_kept_plan_answers_like_a_new_search_while_the_robot_follows_it() {
+    let Agreement {
+        cycles,
+        same_dlm,
+        same_reference,
+        reused,
+        mut lpe_differs,
+    } = kept_against_new(DlmParams::default());
     println!(
-        "{cycles} cycles: same DLM {same_dlm}, kept plan answered {reused}, kept route over 1.2x a new search's {longer}; \
+        "{cycles} cycles: same DLM {same_dlm}, kept plan answered {reused}, \
          a new search with other jitter gives the same DLM in {same_reference}"
     );
     lpe_differs.sort_by(f64::total_cmp);
@@ -263,6 +311,32 @@ fn a_kept_plan_answers_like_a_new_search_while_the_robot_follows_it() {
     assert!(
         kept_share >= 0.8,
         "kept plan answered {kept_share:.3} of {cycles} cycles"
+    );
+}
+
+/// Issue 16's measure with the heading DLM (planning `DlmMeasure::Heading`): the direction of
+/// the route 1-2 m ahead with hysteresis, instead of one point's bearing.
+#[test]
+fn with_the_heading_dlm_a_kept_plan_gives_the_dlm_of_a_new_search_in_99_percent_of_cycles() {
+    let heading = kept_against_new(DlmParams::heading());
+    println!(
+        "heading DLM, {} cycles: same as a new search {}, a new search with other jitter {}",
+        heading.cycles, heading.same_dlm, heading.same_reference
+    );
+    // Measured 2026-11-27: 1 313 of 1 313 (kept = new) and 1 309 (new = new) on these six
+    // routes; over 210 routes on seven maps 98.8 % and 98.9 % (docs/benchmarks.md, "A DLM
+    // that holds").
+    assert!(heading.cycles > 300, "{} cycles", heading.cycles);
+    assert!(
+        heading.same() >= 0.99,
+        "same DLM in {:.3} of {} cycles",
+        heading.same(),
+        heading.cycles
+    );
+    assert!(
+        heading.repeatable() >= 0.98,
+        "a new search with itself: {:.3}",
+        heading.repeatable()
     );
 }
 

@@ -335,6 +335,12 @@ impl RecordOptions {
             h.update(format!("generated {:?}\n", g.scenario).as_bytes());
             h.update(Sha256::digest(g.plan.cells()));
         }
+        if self.run.intention.dlm != planning::DlmParams::curvature() {
+            // Other DLM labels on the same states are another dataset (hashed only when they
+            // are not the curvature DLM's, so the ids of recordings made before the DLM had a
+            // measure stay as they were).
+            h.update(format!("dlm {:?}\n", self.run.intention.dlm).as_bytes());
+        }
         if self.encounters > 0.0 {
             // The kinds too: a recording with a kind added is other data at the same P.
             let kinds = encounter::Encounter::names(&self.encounter_kinds);
@@ -741,6 +747,8 @@ fn index_header(options: &RecordOptions, dataset_id: &str, loaded: &[Loaded]) ->
         "max_turn_radps": options.run.agent.limits.max_turn_radps,
         // The rendering the LPE images were drawn with: a model trained on them records it.
         "lpe_rendering": options.run.intention.lpe,
+        // How the DLM labels were derived: a DLM-Net trained on them records it in its card.
+        "dlm_params": options.run.intention.dlm,
         "policy": options.policy.as_ref().map(|p| serde_json::json!({
             "model": p.model.display().to_string(),
             "kind": p.kind,

@@ -1,24 +1,84 @@
 //! DLM (discretized local move): `TurnLeft | TurnRight | GoForward | Stop` from a path.
 //!
-//! Paper §3.1: the sign and size of the path's local signed curvature at the robot. The
-//! curvature is measured in the robot's frame, as pure pursuit does: the circle through the
-//! robot, tangent to its heading, through the path point `window_m` of arc length ahead of the
-//! path point closest to the robot, has curvature `2 y / (x^2 + y^2)` (x forward, y left).
-//! So "left" means left of where the robot faces, even when the path starts with a turn in
-//! place; a path point behind the robot is always a turn towards its side. `Stop` when the
-//! remaining path is shorter than `stop_distance_m`.
+//! Paper §3.1: the sign and size of the path's local signed curvature at the robot, against a
+//! threshold; `Stop` when the remaining path is shorter than `stop_distance_m`. Two measures of
+//! "how much the path turns ahead", both in the robot's frame, so "left" means left of where
+//! the robot faces, even when the path starts with a turn in place:
+//!
+//! - [`DlmMeasure::Curvature`] (what DLM-Net r1 was trained on): the circle through the robot,
+//!   tangent to its heading, through the path point `window_m` of arc length ahead of the path
+//!   point closest to the robot, has curvature `2 y / (x^2 + y^2)` (x forward, y left), as pure
+//!   pursuit does; a path point behind the robot is always a turn towards its side. The bearing
+//!   of one point 1.5 m ahead moves by 0.2 m of lateral offset past the threshold, so a new
+//!   hybrid-A* search that bends its first metre differently, or cuts a corner 10 cm
+//!   tighter, flips it: half of its changes last 0.3 s or less (docs/benchmarks.md, "A DLM that
+//!   holds").
+//! - [`DlmMeasure::Heading`]: the direction of the path's chord from `heading_start_m` to
+//!   `heading_start_m + heading_chord_m` ahead, against the robot's heading. A turn starts when
+//!   that angle reaches `turn_threshold_rad` and holds while it stays at or past
+//!   `turn_release_rad` on the same side (hysteresis, so the caller passes the previous DLM):
+//!   the route's direction a metre or two ahead, not where one point of it lies, so wiggles and
+//!   corner cuts of a few centimetres do not change it.
 
 use protocol::{Dlm, Pose2D};
 use serde::{Deserialize, Serialize};
 
-/// DLM parameters (the `[dlm]` table of the config file; recorded in DLM-Net model cards).
+/// How the DLM measures the turn of the path ahead (see the module docs).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DlmMeasure {
+    /// The pure-pursuit circle through the path point `window_m` ahead.
+    #[default]
+    Curvature,
+    /// The direction of the path `heading_start_m`..`+heading_chord_m` ahead, with hysteresis.
+    Heading,
+}
+
+impl DlmMeasure {
+    /// The name used in config files and model cards.
+    #[must_use]
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Curvature => "curvature",
+            Self::Heading => "heading",
+        }
+    }
+}
+
+impl std::str::FromStr for DlmMeasure {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "curvature" => Ok(Self::Curvature),
+            "heading" => Ok(Self::Heading),
+            other => Err(format!(
+                "unknown DLM measure {other:?} (expected curvature or heading)"
+            )),
+        }
+    }
+}
+
+/// DLM parameters (the `[dlm]` table of the config file; recorded in recordings and DLM-Net
+/// model cards, since a model is only valid for the DLM it was trained on).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct DlmParams {
-    /// Arc length ahead of the robot at which the path point is taken.
+    /// Which measure of the path's turn decides (see the module docs).
+    pub measure: DlmMeasure,
+    /// `curvature`: arc length ahead of the robot at which the path point is taken.
     pub window_m: f64,
-    /// |curvature| at or above which the move is a turn (1/m; 0.3 = a 3.3 m radius).
+    /// `curvature`: |curvature| at or above which the move is a turn (1/m; 0.3 = a 3.3 m
+    /// radius).
     pub curvature_threshold_per_m: f64,
+    /// `heading`: arc length ahead of the robot where the measured chord of the path starts.
+    pub heading_start_m: f64,
+    /// `heading`: length of that chord.
+    pub heading_chord_m: f64,
+    /// `heading`: |angle| between the chord and the robot's heading at which a turn starts.
+    pub turn_threshold_rad: f64,
+    /// `heading`: a turn holds while the angle stays at or past this on its side.
+    pub turn_release_rad: f64,
     /// `Stop` when the path left to drive is at most this long.
     pub stop_distance_m: f64,
 }
@@ -26,8 +86,13 @@ pub struct DlmParams {
 impl Default for DlmParams {
     fn default() -> Self {
         Self {
+            measure: DlmMeasure::Curvature,
             window_m: 1.5,
             curvature_threshold_per_m: 0.3,
+            heading_start_m: 1.0,
+            heading_chord_m: 1.0,
+            turn_threshold_rad: 0.8,
+            turn_release_rad: 0.6,
             stop_distance_m: 0.3,
         }
     }
@@ -44,6 +109,24 @@ pub struct DlmParamsError {
 }
 
 impl DlmParams {
+    /// The curvature measure with its defaults (the DLM before it had a measure, DLM-Net r1's).
+    #[must_use]
+    pub fn curvature() -> Self {
+        Self {
+            measure: DlmMeasure::Curvature,
+            ..Self::default()
+        }
+    }
+
+    /// The heading measure with its defaults.
+    #[must_use]
+    pub fn heading() -> Self {
+        Self {
+            measure: DlmMeasure::Heading,
+            ..Self::default()
+        }
+    }
+
     /// Checks the fields, naming the first bad one.
     ///
     /// # Errors
@@ -52,6 +135,9 @@ impl DlmParams {
         for (field, value) in [
             ("window_m", self.window_m),
             ("curvature_threshold_per_m", self.curvature_threshold_per_m),
+            ("heading_start_m", self.heading_start_m),
+            ("turn_threshold_rad", self.turn_threshold_rad),
+            ("turn_release_rad", self.turn_release_rad),
             ("stop_distance_m", self.stop_distance_m),
         ] {
             if !value.is_finite() || value < 0.0 {
@@ -62,11 +148,30 @@ impl DlmParams {
                 });
             }
         }
-        if self.window_m <= 0.0 {
+        for (field, value) in [
+            ("window_m", self.window_m),
+            ("heading_chord_m", self.heading_chord_m),
+        ] {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(DlmParamsError {
+                    field,
+                    value,
+                    reason: "must be positive",
+                });
+            }
+        }
+        if self.turn_release_rad > self.turn_threshold_rad {
             return Err(DlmParamsError {
-                field: "window_m",
-                value: self.window_m,
-                reason: "must be positive",
+                field: "turn_release_rad",
+                value: self.turn_release_rad,
+                reason: "must be at most turn_threshold_rad",
+            });
+        }
+        if self.turn_threshold_rad > std::f64::consts::PI {
+            return Err(DlmParamsError {
+                field: "turn_threshold_rad",
+                value: self.turn_threshold_rad,
+                reason: "must be at most pi",
             });
         }
         Ok(())
@@ -114,24 +219,88 @@ pub fn curvature_ahead(path: &[Pose2D], robot: Pose2D, window_m: f64) -> Option<
     Some((2.0 * left / d_sq, remaining_m))
 }
 
-/// The DLM for a robot at `robot` following `path` (see the module docs). An empty path means
-/// there is nothing left to do: `Stop`.
+/// The DLM for a robot at `robot` following `path` with no DLM before it (see the module
+/// docs). An empty path means there is nothing left to do: `Stop`.
 #[must_use]
 pub fn dlm_from_path(path: &[Pose2D], robot: Pose2D, params: &DlmParams) -> Dlm {
-    let Some((kappa, remaining_m)) = curvature_ahead(path, robot, params.window_m) else {
+    next_dlm(path, robot, params, None)
+}
+
+/// The DLM for a robot at `robot` following `path`, after `previous` (the DLM answered to the
+/// robot's last pose, which the heading measure's hysteresis holds a turn on).
+#[must_use]
+pub fn next_dlm(path: &[Pose2D], robot: Pose2D, params: &DlmParams, previous: Option<Dlm>) -> Dlm {
+    let Some(closest) = crate::path::nearest_index(path, robot) else {
         return Dlm::Stop;
     };
+    let rest = &path[closest..];
+    let remaining_m: f64 = rest.windows(2).map(|w| w[0].distance_m(&w[1])).sum();
     let to_end = path.last().map_or(0.0, |g| g.distance_m(&robot));
     if remaining_m.max(to_end) <= params.stop_distance_m {
         return Dlm::Stop;
     }
-    if kappa.abs() < params.curvature_threshold_per_m {
-        Dlm::GoForward
-    } else if kappa > 0.0 {
-        Dlm::TurnLeft
-    } else {
-        Dlm::TurnRight
+    match params.measure {
+        DlmMeasure::Curvature => {
+            let (kappa, _) = curvature_ahead(path, robot, params.window_m).unwrap_or((0.0, 0.0));
+            if kappa.abs() < params.curvature_threshold_per_m {
+                Dlm::GoForward
+            } else if kappa > 0.0 {
+                Dlm::TurnLeft
+            } else {
+                Dlm::TurnRight
+            }
+        }
+        DlmMeasure::Heading => {
+            let angle = heading_ahead_rad(rest, robot, params);
+            match previous {
+                Some(Dlm::TurnLeft) if angle >= params.turn_release_rad => Dlm::TurnLeft,
+                Some(Dlm::TurnRight) if angle <= -params.turn_release_rad => Dlm::TurnRight,
+                _ if angle >= params.turn_threshold_rad => Dlm::TurnLeft,
+                _ if angle <= -params.turn_threshold_rad => Dlm::TurnRight,
+                _ => Dlm::GoForward,
+            }
+        }
     }
+}
+
+/// The angle (rad, positive to the left, in (-pi, pi]) from the robot's heading to the chord
+/// of `rest` (the path from the point closest to the robot on) between `heading_start_m` and
+/// `heading_start_m + heading_chord_m`. Where the path ends before the chord is half long,
+/// the direction from the closest point to the path's end; 0 when that is within 5 cm.
+#[must_use]
+pub fn heading_ahead_rad(rest: &[Pose2D], robot: Pose2D, params: &DlmParams) -> f64 {
+    let (Some(first), Some(last)) = (rest.first(), rest.last()) else {
+        return 0.0;
+    };
+    let start = point_along(rest, params.heading_start_m);
+    let end = point_along(rest, params.heading_start_m + params.heading_chord_m);
+    let (from, to) = if start.distance_m(&end) >= 0.5 * params.heading_chord_m {
+        (start, end)
+    } else if first.distance_m(last) >= 0.05 {
+        (*first, *last)
+    } else {
+        return 0.0;
+    };
+    let direction = (to.y_m - from.y_m).atan2(to.x_m - from.x_m);
+    protocol::normalize_angle(direction - robot.yaw_rad)
+}
+
+/// The point `d_m` of arc length along `path` (its last point past the end).
+fn point_along(path: &[Pose2D], d_m: f64) -> Pose2D {
+    let mut left = d_m;
+    for w in path.windows(2) {
+        let seg = w[0].distance_m(&w[1]);
+        if seg > 1e-12 && left <= seg {
+            let t = left / seg;
+            return Pose2D::new(
+                w[0].x_m + t * (w[1].x_m - w[0].x_m),
+                w[0].y_m + t * (w[1].y_m - w[0].y_m),
+                w[1].yaw_rad,
+            );
+        }
+        left -= seg;
+    }
+    path.last().copied().unwrap_or(Pose2D::new(0.0, 0.0, 0.0))
 }
 
 #[cfg(test)]
@@ -239,6 +408,111 @@ mod tests {
         // Straight behind: a turn, not forward.
         let behind = dlm_from_path(&path, Pose2D::new(0.0, 0.0, -FRAC_PI_2), &params());
         assert_eq!(behind, Dlm::TurnLeft);
+    }
+
+    #[test]
+    fn heading_measure_turns_where_the_route_turns_and_not_for_a_wiggle() {
+        let h = DlmParams::heading();
+        let straight = arc(Pose2D::new(1.0, 2.0, 0.7), 0.0, 10.0, 0.05);
+        assert_eq!(dlm_from_path(&straight, straight[0], &h), Dlm::GoForward);
+        let left = arc(Pose2D::new(0.0, 0.0, -2.0), 1.0, 5.0, 0.05);
+        assert_eq!(dlm_from_path(&left, left[0], &h), Dlm::TurnLeft);
+        let right = arc(Pose2D::new(0.0, 0.0, 2.0), -1.0, 5.0, 0.05);
+        assert_eq!(dlm_from_path(&right, right[0], &h), Dlm::TurnRight);
+        // The curvature measure calls a 0.4/m curve a turn; over the chord 1-2 m ahead it
+        // turns 0.6 rad, short of the 0.8 rad threshold.
+        let gentle = arc(Pose2D::new(0.0, 0.0, 0.0), 0.4, 5.0, 0.05);
+        assert_eq!(dlm_from_path(&gentle, gentle[0], &params()), Dlm::TurnLeft);
+        assert_eq!(dlm_from_path(&gentle, gentle[0], &h), Dlm::GoForward);
+        // A 20 cm S-wiggle in the first metre, then straight on: forward (the curvature
+        // measure's point 1.5 m ahead lies 0.2 m aside).
+        let mut wiggle = arc(Pose2D::new(0.0, 0.0, 0.0), 0.8, 0.5, 0.05);
+        let mid = wiggle[wiggle.len() - 1];
+        wiggle.extend_from_slice(&arc(mid, -0.8, 0.5, 0.05)[1..]);
+        let end = wiggle[wiggle.len() - 1];
+        wiggle.extend_from_slice(&arc(end, 0.0, 5.0, 0.05)[1..]);
+        assert_eq!(dlm_from_path(&wiggle, wiggle[0], &h), Dlm::GoForward);
+    }
+
+    #[test]
+    fn heading_measure_holds_a_turn_until_the_release_angle() {
+        let h = DlmParams::heading();
+        // The path runs east; the robot faces 0.7 rad left of it: between release (0.6) and
+        // threshold (0.8).
+        let path = arc(Pose2D::new(0.0, 0.0, 0.0), 0.0, 5.0, 0.05);
+        let robot = Pose2D::new(0.0, 0.0, 0.7);
+        assert_eq!(next_dlm(&path, robot, &h, None), Dlm::GoForward);
+        assert_eq!(
+            next_dlm(&path, robot, &h, Some(Dlm::GoForward)),
+            Dlm::GoForward
+        );
+        assert_eq!(
+            next_dlm(&path, robot, &h, Some(Dlm::TurnRight)),
+            Dlm::TurnRight
+        );
+        // A turn to the other side is not held.
+        assert_eq!(
+            next_dlm(&path, robot, &h, Some(Dlm::TurnLeft)),
+            Dlm::GoForward
+        );
+        // Past the release angle it ends.
+        let nearly = Pose2D::new(0.0, 0.0, 0.5);
+        assert_eq!(
+            next_dlm(&path, nearly, &h, Some(Dlm::TurnRight)),
+            Dlm::GoForward
+        );
+        // The curvature measure has no hysteresis.
+        assert_eq!(
+            next_dlm(&path, nearly, &params(), Some(Dlm::TurnRight)),
+            dlm_from_path(&path, nearly, &params())
+        );
+    }
+
+    #[test]
+    fn heading_measure_in_the_robot_frame_and_at_the_goal() {
+        let h = DlmParams::heading();
+        let path = arc(Pose2D::new(0.0, 0.0, FRAC_PI_2), 0.0, 5.0, 0.05);
+        assert_eq!(
+            dlm_from_path(&path, Pose2D::new(0.0, 0.0, 0.0), &h),
+            Dlm::TurnLeft
+        );
+        assert_eq!(
+            dlm_from_path(&path, Pose2D::new(0.0, 0.0, PI), &h),
+            Dlm::TurnRight
+        );
+        assert_eq!(
+            dlm_from_path(&path, Pose2D::new(0.0, 0.0, -FRAC_PI_2), &h),
+            Dlm::TurnLeft
+        );
+        // 1.2 m before the end the chord is cut short: the direction to the end decides.
+        let near = path[path.len() - 25];
+        assert_eq!(dlm_from_path(&path, near, &h), Dlm::GoForward);
+        let beside = Pose2D::new(near.x_m, near.y_m, 0.0);
+        assert_eq!(dlm_from_path(&path, beside, &h), Dlm::TurnLeft);
+        assert_eq!(dlm_from_path(&path, path[path.len() - 4], &h), Dlm::Stop);
+    }
+
+    #[test]
+    fn heading_params_are_checked() {
+        DlmParams::heading().validate().unwrap();
+        let e = DlmParams {
+            turn_release_rad: 0.9,
+            ..DlmParams::heading()
+        }
+        .validate()
+        .unwrap_err();
+        assert_eq!(e.field, "turn_release_rad");
+        let e = DlmParams {
+            heading_chord_m: 0.0,
+            ..DlmParams::heading()
+        }
+        .validate()
+        .unwrap_err();
+        assert_eq!(e.field, "heading_chord_m");
+        let parsed: DlmParams =
+            toml::from_str("measure = \"heading\"\nturn_threshold_rad = 0.9").unwrap();
+        assert_eq!(parsed.measure, DlmMeasure::Heading);
+        assert!(toml::from_str::<DlmParams>("measure = \"bogus\"").is_err());
     }
 
     #[test]

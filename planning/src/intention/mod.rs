@@ -10,7 +10,7 @@ pub mod lpe;
 pub mod pipeline;
 pub mod reuse;
 
-pub use dlm::{dlm_from_path, DlmParams};
+pub use dlm::{dlm_from_path, next_dlm, DlmMeasure, DlmParams};
 pub use lpe::{render_lpe, LpeImage, LpeParams};
 pub use pipeline::{
     stop_intention, thin_path, Answer, IntentionConfig, IntentionPlanner, Planned, RefreshJob,

@@ -16,7 +16,7 @@ use crate::config::PlannerConfig;
 use crate::error::{Endpoint, PlanError};
 use crate::goals::{Advance, GoalProgress};
 use crate::hybrid_astar::Planner;
-use crate::intention::dlm::{dlm_from_path, DlmParams};
+use crate::intention::dlm::{next_dlm, DlmParams};
 use crate::intention::lpe::{render_lpe, LpeImage, LpeParams};
 use crate::intention::reuse::{KeptPlan, ReuseParams};
 use crate::map::PlanningMap;
@@ -148,6 +148,8 @@ pub struct IntentionPlanner {
     refresh: Refresh,
     /// Counts kept plans, so a search's result is adopted only by the plan it refreshes.
     generation: u64,
+    /// The DLM of the last answer, which the heading measure's hysteresis holds a turn on.
+    last_dlm: Option<Dlm>,
 }
 
 /// Where the due new search of a kept plan stands.
@@ -200,6 +202,7 @@ impl IntentionPlanner {
             kept: None,
             refresh: Refresh::Idle,
             generation: 0,
+            last_dlm: None,
         })
     }
 
@@ -226,6 +229,7 @@ impl IntentionPlanner {
         self.free.set_map(map)?;
         self.trail.clear();
         self.drop_kept();
+        self.last_dlm = None;
         Ok(())
     }
 
@@ -234,6 +238,7 @@ impl IntentionPlanner {
     pub fn clear_trail(&mut self) {
         self.trail.clear();
         self.drop_kept();
+        self.last_dlm = None;
     }
 
     fn drop_kept(&mut self) {
@@ -336,7 +341,10 @@ impl IntentionPlanner {
             self.trail.pop_front();
         }
         match self.advance(robot, progress) {
-            Advance::Done => Answer::Done,
+            Advance::Done => {
+                self.last_dlm = None;
+                Answer::Done
+            }
             Advance::Heading { index, target } => {
                 let free_heading = progress
                     .goals
@@ -396,7 +404,8 @@ impl IntentionPlanner {
         {
             self.refresh = Refresh::Due(robot);
         }
-        let dlm = dlm_from_path(&poses, robot, &self.config.dlm);
+        let dlm = next_dlm(&poses, robot, &self.config.dlm, self.last_dlm);
+        self.last_dlm = Some(dlm);
         let lpe = if render_lpe {
             let trail: Vec<Pose2D> = self.trail.iter().copied().collect();
             // The parameters were validated in `new`, the only way rendering can fail.

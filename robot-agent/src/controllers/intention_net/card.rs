@@ -15,6 +15,7 @@
 //! | `dataset_id` | which demonstrations it was trained on |
 //! | `validation_loss` | final validation loss, finite and ≥ 0 |
 //! | `lpe_rendering` | `lpe` models only: JSON of the planner's LPE rendering parameters |
+//! | `dlm_measure`, `dlm_params` | `dlm` models only, optional: how the planner derived the DLM the network was trained on (planning `DlmParams`; absent = `curvature`, the defaults); the planner's `[dlm]` table must say the same, `eval table` takes it from `dlm.card.json` |
 //! | `lpe_image_px` | `lpe` models only, optional: the `lpe` input size (square) when the network takes the rendering scaled down (area average); absent = the rendering's `size_px` |
 //!
 //! Unknown keys are ignored on purpose: exporters (PyTorch, onnx tools) add their own.
