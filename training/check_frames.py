@@ -2,6 +2,11 @@
 models (robot-agent/tests/shipped_models.rs).
 
     python -m training.check_frames --data data/d2 --models models --out models/checks
+    python -m training.check_frames --refresh --models models --out models/checks
+
+`--refresh` keeps the frames already in `--out` (with their recorded intention and label) and
+recomputes every model's outputs on them: what a new shipped model needs when the recording
+the frames came from is not at hand.
 
 From a recording it takes, deterministically, 12 validation-style frames (3 where the expert turns
 left under a turn_left intention, 3 turning right under turn_right, 3 go_forward, 3 at random),
@@ -122,12 +127,15 @@ def normalize(img_u8: np.ndarray, meta: dict[str, str]) -> np.ndarray:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m training.check_frames", description=__doc__.splitlines()[0])
-    p.add_argument("--data", required=True, help="a recording (eval record)")
+    p.add_argument("--data", help="a recording (eval record)")
+    p.add_argument("--refresh", action="store_true",
+                   help="keep the frames in --out and recompute the models' outputs on them")
     p.add_argument("--models", default="models", help="folder with dlm.onnx, lpe.onnx, none.onnx")
     p.add_argument("--out", default="models/checks")
     args = p.parse_args(argv)
+    if args.refresh == bool(args.data):
+        p.error("give either --data (new frames) or --refresh (the frames in --out)")
 
-    ds = dataset.load(args.data)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     sessions = {}
@@ -138,18 +146,33 @@ def main(argv=None) -> int:
     if not sessions:
         raise SystemExit(f"no model in {args.models}")
 
+    if args.refresh:
+        old = json.loads((out / "expected.json").read_text())
+        dataset_id = str(old["dataset_id"])
+        inputs = [
+            (np.asarray(Image.open(out / f["files"]["camera"]).convert("RGB")),
+             np.asarray(Image.open(out / f["files"]["lpe"]).convert("RGB")),
+             f["files"], int(f["dlm"]), [float(v) for v in f["label"]])
+            for f in old["frames"]
+        ]
+    else:
+        ds = dataset.load(args.data)
+        dataset_id = str(ds.index["dataset_id"])
+        inputs = []
+        for n, i in enumerate(pick(ds)):
+            sample = ds.sample(i)
+            camera, lpe = np.asarray(sample["camera"]), np.asarray(sample["lpe"])
+            files = {"camera": f"frame_{n:02}_camera.png", "lpe": f"frame_{n:02}_lpe.png"}
+            Image.fromarray(camera).save(out / files["camera"])
+            Image.fromarray(lpe).save(out / files["lpe"])
+            inputs.append((camera, lpe, files, int(sample["dlm"]), [float(v) for v in sample["label"]]))
+
     frames = []
-    for n, i in enumerate(pick(ds)):
-        sample = ds.sample(i)
-        camera, lpe = np.asarray(sample["camera"]), np.asarray(sample["lpe"])
-        files = {"camera": f"frame_{n:02}_camera.png", "lpe": f"frame_{n:02}_lpe.png"}
-        Image.fromarray(camera).save(out / files["camera"])
-        Image.fromarray(lpe).save(out / files["lpe"])
-        dlm = int(sample["dlm"])
+    for camera, lpe, files, dlm, label in inputs:
         entry = {
             "files": files,
             "dlm": dlm,
-            "label": [float(v) for v in sample["label"]],
+            "label": label,
             "outputs": {},
         }
         for kind, sess in sessions.items():
@@ -165,7 +188,7 @@ def main(argv=None) -> int:
         frames.append(entry)
     doc = {
         "what": "frames of a recording and the shipped models' outputs on them (training/check_frames.py)",
-        "dataset_id": str(ds.index["dataset_id"]),
+        "dataset_id": dataset_id,
         "models": {kind: sess.get_modelmeta().custom_metadata_map.get("dataset_id", "") for kind, sess in sessions.items()},
         "frames": frames,
     }

@@ -214,9 +214,10 @@ pub struct TableArgs {
     /// does not fit are left out. With `--generated N`: the situation on N buildings.
     #[arg(long)]
     encounter: Option<Encounter>,
-    /// How the planner derives the DLM (`curvature` or `heading`, planning `DlmMeasure`);
+    /// How the planner derives the DLM (`heading` or `curvature`, planning `DlmMeasure`);
     /// default: what the DLM-Net's card says it was trained on (`dlm_measure`; a card
-    /// without one: curvature). A value that contradicts the card is refused.
+    /// without one: curvature, DLM-Net r1's), and heading for a table without DLM-Net. A
+    /// value that contradicts the card is refused.
     #[arg(long)]
     dlm_measure: Option<DlmMeasure>,
 }
@@ -298,9 +299,10 @@ pub struct RecordArgs {
     /// Also record the camera (JPEG) in the run logs.
     #[arg(long, requires = "record_dir")]
     record_camera: bool,
-    /// How the planner derives the DLM labels (`curvature` or `heading`, planning
-    /// `DlmMeasure`); index.json records the `[dlm]` parameters as `dlm_params`.
-    #[arg(long, default_value = "curvature")]
+    /// How the planner derives the DLM labels (`heading`, the default, or `curvature`, what
+    /// DLM-Net r1 was trained on; planning `DlmMeasure`); index.json records the `[dlm]`
+    /// parameters as `dlm_params`.
+    #[arg(long, default_value = "heading")]
     dlm_measure: DlmMeasure,
     /// Output folder: index.json and shard_NNNNN/*.npy (training/DATASET.md).
     #[arg(long)]
@@ -309,7 +311,7 @@ pub struct RecordArgs {
 
 /// The DLM measure a table runs with: the one asked for, else the DLM-Net card's
 /// (`<models>/dlm.card.json`, key `dlm_measure`; absent: curvature, what DLM-Net r1 was
-/// trained on) when the table runs DLM-Net, else curvature.
+/// trained on) when the table runs DLM-Net, else the default (heading).
 fn dlm_measure_for(
     asked: Option<DlmMeasure>,
     runs_dlm_net: bool,

@@ -206,17 +206,17 @@ fn a_short_recording_has_the_documented_files_and_values() {
     assert_eq!(label[..2 * first], clean_label[..2 * first]);
     assert_ne!(label, clean_label);
 
-    // The heading DLM labels the same states (the expert never reads the DLM), and is
+    // The curvature DLM labels the same states (the expert never reads the DLM), and is
     // another dataset.
-    let mut heading = options(1.0, 2);
-    heading.run.intention.dlm = planning::DlmParams::heading();
-    assert_ne!(heading.dataset_id().unwrap(), summary.dataset_id);
-    let heading_dir = tempfile::tempdir().unwrap();
-    record(&heading, heading_dir.path(), &|_| {}).unwrap();
-    let (heading_index, heading_fields) = read_all(heading_dir.path());
-    assert_eq!(heading_index["dlm_params"]["measure"], "heading");
-    assert_eq!(heading_fields["label"], fields["label"]);
-    assert_eq!(heading_fields["camera"], fields["camera"]);
+    let mut curvature = options(1.0, 2);
+    curvature.run.intention.dlm = planning::DlmParams::curvature();
+    assert_ne!(curvature.dataset_id().unwrap(), summary.dataset_id);
+    let curvature_dir = tempfile::tempdir().unwrap();
+    record(&curvature, curvature_dir.path(), &|_| {}).unwrap();
+    let (curvature_index, curvature_fields) = read_all(curvature_dir.path());
+    assert_eq!(curvature_index["dlm_params"]["measure"], "curvature");
+    assert_eq!(curvature_fields["label"], fields["label"]);
+    assert_eq!(curvature_fields["camera"], fields["camera"]);
 }
 
 #[test]

@@ -7,44 +7,16 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod common;
+
 use std::sync::Arc;
 
+use common::{along, estimate};
 use planning::sample::sample_pairs;
 use planning::{
     Answer, DlmMeasure, Goal, GoalProgress, IntentionConfig, IntentionPlanner, PlanningMap,
 };
-use protocol::{Dlm, Header, MapName, MapRef, Pose2D, PoseEstimate};
-
-fn estimate(pose: Pose2D, seq: u64) -> PoseEstimate {
-    PoseEstimate {
-        header: Header::new(seq, 1_000 + seq),
-        pose,
-        covariance: [0.0; 9],
-        sensor_stamp_ns: 1_000 + seq,
-        map: MapRef {
-            name: MapName::new("depot").unwrap(),
-            version: 1,
-        },
-    }
-}
-
-/// The point `d_m` along `path`, facing along it.
-fn along(path: &[Pose2D], mut d_m: f64) -> Pose2D {
-    for w in path.windows(2) {
-        let seg = w[0].distance_m(&w[1]);
-        if seg > 1e-9 && d_m <= seg {
-            let t = d_m / seg;
-            let yaw = (w[1].y_m - w[0].y_m).atan2(w[1].x_m - w[0].x_m);
-            return Pose2D::new(
-                w[0].x_m + t * (w[1].x_m - w[0].x_m),
-                w[0].y_m + t * (w[1].y_m - w[0].y_m),
-                yaw,
-            );
-        }
-        d_m -= seg;
-    }
-    *path.last().unwrap()
-}
+use protocol::{Dlm, Pose2D};
 
 /// ±3 cm, ±0.03 rad of deterministic jitter, as the pipeline test's.
 fn jittered(robot: Pose2D, phase: u64) -> Pose2D {

@@ -3,26 +3,16 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod common;
+
 use std::sync::Arc;
 
+use common::{along, estimate};
 use planning::sample::sample_pairs;
 use planning::{
     Answer, DlmParams, Goal, GoalProgress, IntentionConfig, IntentionPlanner, PlanningMap,
 };
-use protocol::{Dlm, Header, MapName, MapRef, Pose2D, PoseEstimate, TaskId};
-
-fn estimate(pose: Pose2D, seq: u64) -> PoseEstimate {
-    PoseEstimate {
-        header: Header::new(seq, 1_000 + seq),
-        pose,
-        covariance: [0.0; 9],
-        sensor_stamp_ns: 1_000 + seq,
-        map: MapRef {
-            name: MapName::new("depot").unwrap(),
-            version: 1,
-        },
-    }
-}
+use protocol::{Dlm, Header, Pose2D, TaskId};
 
 fn pipeline() -> (IntentionPlanner, Vec<(Pose2D, Pose2D)>) {
     let config = IntentionConfig::default();
@@ -135,24 +125,6 @@ fn a_bad_configuration_is_refused_with_its_field() {
     let map = Arc::new(PlanningMap::new(test_support::nav2_map("depot"), &config.planner).unwrap());
     let err = IntentionPlanner::new(map, config).err().expect("refused");
     assert!(err.to_string().contains("goal_tolerance_m"), "{err}");
-}
-
-/// The point `d_m` along `path` (linear between poses, the segment's heading).
-fn along(path: &[Pose2D], mut d_m: f64) -> Pose2D {
-    for w in path.windows(2) {
-        let seg = w[0].distance_m(&w[1]);
-        if seg > 1e-9 && d_m <= seg {
-            let t = d_m / seg;
-            let yaw = (w[1].y_m - w[0].y_m).atan2(w[1].x_m - w[0].x_m);
-            return Pose2D::new(
-                w[0].x_m + t * (w[1].x_m - w[0].x_m),
-                w[0].y_m + t * (w[1].y_m - w[0].y_m),
-                yaw,
-            );
-        }
-        d_m -= seg;
-    }
-    *path.last().unwrap()
 }
 
 /// What one drive of the test's six depot routes measured.
@@ -268,7 +240,7 @@ fn a_kept_plan_answers_like_a_new_search_while_the_robot_follows_it() {
         same_reference,
         reused,
         mut lpe_differs,
-    } = kept_against_new(DlmParams::default());
+    } = kept_against_new(DlmParams::curvature());
     println!(
         "{cycles} cycles: same DLM {same_dlm}, kept plan answered {reused}, \
          a new search with other jitter gives the same DLM in {same_reference}"

@@ -38,8 +38,8 @@ sys.path.insert(0, str(ROOT))
 from training import card as card_mod  # noqa: E402
 
 PX = 48
-EPISODES = 5
-PER_EPISODE = 120
+EPISODES = 13  # check_frames takes 12 frames from distinct episodes
+PER_EPISODE = 60
 
 
 def write_synthetic(root: Path, seed: int = 0) -> None:
@@ -120,6 +120,9 @@ def check_kind(kind: str, data_dir: Path, out: Path, seconds: float, backbone: s
         assert extra in card, f"card lacks {extra}"
     if kind == "lpe":
         assert card_mod.lpe_input_px(card) == lpe_px, card
+    if kind == "dlm":
+        # The DLM the labels were derived with (a recording without dlm_params: curvature).
+        assert card["dlm_measure"] == index.get("dlm_params", {}).get("measure", "curvature"), card
     feeds = {"camera": np.zeros((3, 3, px, px), np.float32)}
     if kind == "dlm":
         feeds["intention"] = np.eye(4, dtype=np.float32)[[0, 2, 3]]
@@ -133,6 +136,40 @@ def check_kind(kind: str, data_dir: Path, out: Path, seconds: float, backbone: s
     summary = json.loads((out / "summary.json").read_text())
     return {"kind": kind, "backbone": backbone, "max_abs_diff": diff, "val_loss": float(card["validation_loss"]),
             "epochs": summary["epochs"], "samples_per_s": summary["train_samples_per_s"]}
+
+
+def check_frames_and_measures(data_dir: Path, work: Path) -> None:
+    """The agent's check frames from the recording, then refreshed on the same frames (the same
+    outputs); and recordings of two DLM measures are refused together."""
+    import shutil
+
+    models = work / "models"
+    models.mkdir(exist_ok=True)
+    for kind in ("dlm", "lpe", "none"):
+        shutil.copy(work / kind / f"{kind}.onnx", models / f"{kind}.onnx")
+    checks = work / "checks"
+    run([sys.executable, "-m", "training.check_frames", "--data", str(data_dir), "--models", str(models),
+         "--out", str(checks)])
+    first = json.loads((checks / "expected.json").read_text())
+    assert first["frames"] and set(first["frames"][0]["outputs"]) == {"dlm", "lpe", "none"}, first
+    run([sys.executable, "-m", "training.check_frames", "--refresh", "--models", str(models), "--out", str(checks)])
+    again = json.loads((checks / "expected.json").read_text())
+    assert again["dataset_id"] == first["dataset_id"] and len(again["frames"]) == len(first["frames"])
+    for a, b in zip(first["frames"], again["frames"]):
+        assert a["dlm"] == b["dlm"] and a["label"] == b["label"]
+        for kind in a["outputs"]:
+            assert np.allclose(a["outputs"][kind], b["outputs"][kind], atol=1e-5), (a, b)
+
+    heading = work / "data-heading"
+    shutil.copytree(data_dir, heading)
+    index = json.loads((heading / "index.json").read_text())
+    index["dlm_params"] = {"measure": "heading"}
+    index["dataset_id"] = "heading-" + str(index["dataset_id"])
+    (heading / "index.json").write_text(json.dumps(index))
+    p = subprocess.run([sys.executable, "-m", "training.train", "--kind", "dlm", "--data", str(data_dir), str(heading),
+                        "--out", str(work / "mixed"), "--epochs", "1", "--threads", "1"],
+                       cwd=ROOT, capture_output=True, text=True)
+    assert p.returncode != 0 and "measure" in p.stderr, p.stderr[-2000:]
 
 
 def smoke(seconds: float = 30.0, data: str | None = None, keep: str | None = None) -> list[dict]:
@@ -150,6 +187,7 @@ def smoke(seconds: float = 30.0, data: str | None = None, keep: str | None = Non
         run([sys.executable, "-m", "training.export", "--checkpoint", str(work / "dlm" / "checkpoint_last.pt"),
              "--out", str(work / "reexport" / "dlm.onnx"), "--threads", "1"])
         assert (work / "reexport" / "dlm.onnx").is_file()
+        check_frames_and_measures(data_dir, work)
     for r in results:
         print(f"smoke {r['kind']} ({r['backbone']}): {r['epochs']} epochs, {r['samples_per_s']} samples/s, "
               f"val loss {r['val_loss']:.4f}, onnxruntime vs torch max |diff| {r['max_abs_diff']:.2e}")

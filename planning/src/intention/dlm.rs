@@ -13,7 +13,8 @@
 //!   hybrid-A* search that bends its first metre differently, or cuts a corner 10 cm
 //!   tighter, flips it: half of its changes last 0.3 s or less (docs/benchmarks.md, "A DLM that
 //!   holds").
-//! - [`DlmMeasure::Heading`]: the direction of the path's chord from `heading_start_m` to
+//! - [`DlmMeasure::Heading`] (the default, what the shipped DLM-Net was trained on): the
+//!   direction of the path's chord from `heading_start_m` to
 //!   `heading_start_m + heading_chord_m` ahead, against the robot's heading. A turn starts when
 //!   that angle reaches `turn_threshold_rad` and holds while it stays at or past
 //!   `turn_release_rad` on the same side (hysteresis, so the caller passes the previous DLM):
@@ -27,10 +28,11 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum DlmMeasure {
-    /// The pure-pursuit circle through the path point `window_m` ahead.
-    #[default]
+    /// The pure-pursuit circle through the path point `window_m` ahead (DLM-Net r1's).
     Curvature,
-    /// The direction of the path `heading_start_m`..`+heading_chord_m` ahead, with hysteresis.
+    /// The direction of the path `heading_start_m`..`+heading_chord_m` ahead, with hysteresis
+    /// (the default since DLM-Net h1, docs/evaluation.md).
+    #[default]
     Heading,
 }
 
@@ -86,7 +88,7 @@ pub struct DlmParams {
 impl Default for DlmParams {
     fn default() -> Self {
         Self {
-            measure: DlmMeasure::Curvature,
+            measure: DlmMeasure::Heading,
             window_m: 1.5,
             curvature_threshold_per_m: 0.3,
             heading_start_m: 1.0,
@@ -118,7 +120,7 @@ impl DlmParams {
         }
     }
 
-    /// The heading measure with its defaults.
+    /// The heading measure with its defaults (the default).
     #[must_use]
     pub fn heading() -> Self {
         Self {
@@ -311,6 +313,7 @@ mod tests {
     #[test]
     fn bad_params_name_the_field_and_value() {
         DlmParams::default().validate().unwrap();
+        assert_eq!(DlmParams::default(), DlmParams::heading());
         let bad = DlmParams {
             window_m: 0.0,
             ..DlmParams::default()
@@ -352,8 +355,9 @@ mod tests {
         out
     }
 
+    /// The curvature measure, which the older tests here describe.
     fn params() -> DlmParams {
-        DlmParams::default()
+        DlmParams::curvature()
     }
 
     #[test]
