@@ -299,47 +299,41 @@ pub struct RecordArgs {
     /// Also record the camera (JPEG) in the run logs.
     #[arg(long, requires = "record_dir")]
     record_camera: bool,
-    /// How the planner derives the DLM labels (`heading`, the default, or `curvature`, what
-    /// DLM-Net r1 was trained on; planning `DlmMeasure`); index.json records the `[dlm]`
-    /// parameters as `dlm_params`.
-    #[arg(long, default_value = "heading")]
-    dlm_measure: DlmMeasure,
+    /// How the planner derives the DLM labels (`heading` or `curvature`, what DLM-Net r1 was
+    /// trained on; planning `DlmMeasure`); default: the measure a DLM-Net `--policy` was
+    /// trained on (its card), else heading. index.json records the `[dlm]` parameters as
+    /// `dlm_params`.
+    #[arg(long)]
+    dlm_measure: Option<DlmMeasure>,
     /// Output folder: index.json and shard_NNNNN/*.npy (training/DATASET.md).
     #[arg(long)]
     out: PathBuf,
 }
 
-/// The DLM measure a table runs with: the one asked for, else the DLM-Net card's
-/// (`<models>/dlm.card.json`, key `dlm_measure`; absent: curvature, what DLM-Net r1 was
-/// trained on) when the table runs DLM-Net, else the default (heading).
+/// The DLM measure to plan with: the one asked for, else the one the DLM-Net `dlm_model`
+/// (when one drives) was trained on, read from its ONNX card (`dlm_measure`; absent: curvature,
+/// DLM-Net r1's), else the default (heading). A measure asked for that contradicts the card is
+/// refused: the network would be fed intentions it never saw.
 fn dlm_measure_for(
     asked: Option<DlmMeasure>,
-    runs_dlm_net: bool,
-    models_dir: &std::path::Path,
+    dlm_model: Option<&std::path::Path>,
 ) -> anyhow::Result<DlmMeasure> {
-    if !runs_dlm_net {
+    let Some(model) = dlm_model else {
         return Ok(asked.unwrap_or_default());
-    }
-    let card_path = models_dir.join("dlm.card.json");
-    let trained_on = match std::fs::read_to_string(&card_path) {
-        Ok(text) => {
-            let card: serde_json::Value = serde_json::from_str(&text)
-                .with_context(|| format!("reading {}", card_path.display()))?;
-            match card.get("dlm_measure").and_then(serde_json::Value::as_str) {
-                Some(name) => name
-                    .parse::<DlmMeasure>()
-                    .map_err(|e| anyhow::anyhow!("{}: dlm_measure: {e}", card_path.display()))?,
-                None => DlmMeasure::Curvature,
-            }
-        }
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => DlmMeasure::Curvature,
-        Err(e) => return Err(e).with_context(|| format!("reading {}", card_path.display())),
+    };
+    let card = robot_agent::controllers::intention_net::read_card(model)
+        .with_context(|| format!("reading the card of {}", model.display()))?;
+    let trained_on = match card.dlm_measure.as_deref() {
+        Some(name) => name
+            .parse::<DlmMeasure>()
+            .map_err(|e| anyhow::anyhow!("{}: card key dlm_measure: {e}", model.display()))?,
+        None => DlmMeasure::Curvature,
     };
     match asked {
         Some(a) if a != trained_on => anyhow::bail!(
-            "--dlm-measure {} but {} says DLM-Net was trained on the {} DLM",
+            "--dlm-measure {} but the card of {} says it was trained on the {} DLM",
             a.as_str(),
-            card_path.display(),
+            model.display(),
             trained_on.as_str()
         ),
         _ => Ok(trained_on),
@@ -385,7 +379,13 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
                 record: record_settings(args.record_dir.as_deref(), args.record_camera),
                 ..TableOptions::default()
             };
-            run.intention.dlm.measure = args.dlm_measure;
+            let dlm_policy = match &args.policy {
+                Some(model) => (robot_agent::controllers::intention_net::read_card(model)?.kind
+                    == robot_agent::controllers::intention_net::ModelKind::Dlm)
+                    .then_some(model.as_path()),
+                None => None,
+            };
+            run.intention.dlm.measure = dlm_measure_for(args.dlm_measure, dlm_policy)?;
             run
         },
         command: std::env::args().collect::<Vec<_>>().join(" "),
@@ -512,14 +512,16 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
         record: record_settings(args.record_dir.as_deref(), args.record_camera),
         ..TableOptions::default()
     };
+    let dlm_model = options.model_path(ControllerKind::Dlm);
     let options = TableOptions {
         intention: {
             let mut intention = options.intention;
             intention.reuse.enabled = args.path_reuse;
             intention.dlm.measure = dlm_measure_for(
                 args.dlm_measure,
-                methods.contains(&ControllerKind::Dlm),
-                &options.models_dir,
+                methods
+                    .contains(&ControllerKind::Dlm)
+                    .then_some(dlm_model.as_path()),
             )?;
             intention
         },
@@ -772,49 +774,37 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_table_runs_the_dlm_its_dlm_net_was_trained_on() {
-        let dir = tempfile::tempdir().unwrap();
-        // No card, or a card without the key: DLM-Net r1's curvature.
+    fn the_dlm_is_planned_with_the_measure_its_dlm_net_was_trained_on() {
+        let shipped = test_support::models_dir().join("dlm.onnx");
+        let fixture = test_support::models_dir().join("fixtures").join("dlm.onnx");
+        // The shipped DLM-Net was trained on the heading DLM; a card without the key
+        // (the fixture, DLM-Net r1) means curvature.
         assert_eq!(
-            dlm_measure_for(None, true, dir.path()).unwrap(),
-            DlmMeasure::Curvature
-        );
-        std::fs::write(dir.path().join("dlm.card.json"), r#"{"kind": "dlm"}"#).unwrap();
-        assert_eq!(
-            dlm_measure_for(None, true, dir.path()).unwrap(),
-            DlmMeasure::Curvature
-        );
-        std::fs::write(
-            dir.path().join("dlm.card.json"),
-            r#"{"kind": "dlm", "dlm_measure": "heading"}"#,
-        )
-        .unwrap();
-        assert_eq!(
-            dlm_measure_for(None, true, dir.path()).unwrap(),
+            dlm_measure_for(None, Some(&shipped)).unwrap(),
             DlmMeasure::Heading
         );
         assert_eq!(
-            dlm_measure_for(Some(DlmMeasure::Heading), true, dir.path()).unwrap(),
+            dlm_measure_for(None, Some(&fixture)).unwrap(),
+            DlmMeasure::Curvature
+        );
+        assert_eq!(
+            dlm_measure_for(Some(DlmMeasure::Heading), Some(&shipped)).unwrap(),
             DlmMeasure::Heading
         );
-        let err = dlm_measure_for(Some(DlmMeasure::Curvature), true, dir.path()).unwrap_err();
+        let err = dlm_measure_for(Some(DlmMeasure::Curvature), Some(&shipped)).unwrap_err();
         assert!(
             err.to_string().contains("--dlm-measure curvature")
                 && err.to_string().contains("heading"),
             "{err}"
         );
-        // Without DLM-Net in the table the card does not matter.
+        // Without a DLM-Net, what is asked for, else the default.
         assert_eq!(
-            dlm_measure_for(Some(DlmMeasure::Curvature), false, dir.path()).unwrap(),
+            dlm_measure_for(Some(DlmMeasure::Curvature), None).unwrap(),
             DlmMeasure::Curvature
         );
-        std::fs::write(
-            dir.path().join("dlm.card.json"),
-            r#"{"dlm_measure": "sideways"}"#,
-        )
-        .unwrap();
-        let err = dlm_measure_for(None, true, dir.path()).unwrap_err();
-        assert!(err.to_string().contains("sideways"), "{err}");
+        assert_eq!(dlm_measure_for(None, None).unwrap(), DlmMeasure::Heading);
+        let missing = test_support::models_dir().join("no-such-model.onnx");
+        assert!(dlm_measure_for(None, Some(&missing)).is_err());
     }
 
     #[test]

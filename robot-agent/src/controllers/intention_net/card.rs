@@ -15,7 +15,7 @@
 //! | `dataset_id` | which demonstrations it was trained on |
 //! | `validation_loss` | final validation loss, finite and ≥ 0 |
 //! | `lpe_rendering` | `lpe` models only: JSON of the planner's LPE rendering parameters |
-//! | `dlm_measure`, `dlm_params` | `dlm` models only, optional: how the planner derived the DLM the network was trained on (planning `DlmParams`; absent = `curvature`, the defaults); the planner's `[dlm]` table must say the same, `eval table` takes it from `dlm.card.json` |
+//! | `dlm_measure`, `dlm_params` | `dlm` models only, optional: how the planner derived the DLM the network was trained on (planning `DlmParams`; absent = `curvature`); the planner's `[dlm]` table must say the same, and `eval table` and `eval record --policy` plan with it |
 //! | `lpe_image_px` | `lpe` models only, optional: the `lpe` input size (square) when the network takes the rendering scaled down (area average); absent = the rendering's `size_px` |
 //!
 //! Unknown keys are ignored on purpose: exporters (PyTorch, onnx tools) add their own.
@@ -118,6 +118,10 @@ pub struct ModelCard {
     pub lpe_rendering: Option<LpeRendering>,
     /// `lpe` models only: the LPE input size when it differs from the rendering's.
     pub lpe_image_px: Option<u32>,
+    /// `dlm` models only: the planner's DLM measure the network was trained on (planning
+    /// `DlmMeasure` by name; `None`: a card from before it was recorded, the curvature DLM).
+    /// The agent does not derive DLMs, so it only carries this for whoever plans them.
+    pub dlm_measure: Option<String>,
 }
 
 /// A card that is missing a key or has a value that makes no sense.
@@ -372,6 +376,10 @@ impl ModelCard {
             validation_loss,
             lpe_rendering,
             lpe_image_px,
+            dlm_measure: match kind {
+                ModelKind::Dlm => meta.get("dlm_measure").cloned(),
+                ModelKind::Lpe | ModelKind::None => None,
+            },
         })
     }
 
