@@ -71,8 +71,8 @@ def make(meta: dict, validation_loss: float, extras: dict | None = None) -> dict
         card["lpe_rendering"] = json.dumps(meta["lpe_rendering"], sort_keys=True, separators=(",", ":"))
         card["lpe_image_px"] = str(int(meta["lpe_px"]))
     if kind == "dlm":
-        # The DLM the labels were derived with (planning DlmParams); eval table runs the planner
-        # with this measure, and the fleet's [dlm] table must say the same.
+        # The DLM the labels were derived with (planning DlmParams): `eval table` and `eval record
+        # --policy` plan with this measure, and the fleet's [dlm] table must say the same.
         params = meta.get("dlm_params") or {"measure": "curvature"}
         card["dlm_measure"] = str(params.get("measure", "curvature"))
         card["dlm_params"] = json.dumps(params, sort_keys=True, separators=(",", ":"))

@@ -51,12 +51,12 @@ SLOW_V = 0.2
 # index.json does not state them.
 DEFAULT_MAX_SPEED_MPS = 0.7
 DEFAULT_MAX_TURN_RADPS = 1.2
-# The planner's default LPE rendering (protocol LpeParams::default()), only for recordings made
-# before `eval record` wrote the rendering into index.json (`lpe_rendering`).
 # The DLM a recording made before `eval record` wrote `dlm_params` was labelled with (planning
-# DlmParams::default(): the curvature measure, what DLM-Net r1 was trained on).
+# DlmParams::curvature(), what DLM-Net r1 was trained on; the default is now heading).
 DEFAULT_DLM_MEASURE = "curvature"
 
+# The planner's default LPE rendering (protocol LpeParams::default()), only for recordings made
+# before `eval record` wrote the rendering into index.json (`lpe_rendering`).
 DEFAULT_LPE_RENDERING = {
     "size_px": 224,
     "metres_per_px": 0.05,
