@@ -347,6 +347,16 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
     } else {
         args.scenario.clone()
     };
+    let policy = args
+        .policy
+        .as_deref()
+        .map(|model| crate::record::Policy::load(model, args.beta))
+        .transpose()?;
+    // A DLM-Net that drives is fed the DLM it was trained on.
+    let dlm_policy = policy
+        .as_ref()
+        .filter(|p| p.kind == ControllerKind::Dlm)
+        .map(|p| p.model.clone());
     let options = crate::record::RecordOptions {
         scenarios,
         generated: seed_range(args.generated_first_seed, args.generated)?,
@@ -367,11 +377,7 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
         every: args.every,
         episode_s: args.episode_s,
         shard_samples: args.shard_samples,
-        policy: args
-            .policy
-            .as_deref()
-            .map(|model| crate::record::Policy::load(model, args.beta))
-            .transpose()?,
+        policy,
         max_wall_s: args.max_minutes.map(|m| m * 60.0),
         run: {
             let mut run = TableOptions {
@@ -379,13 +385,7 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
                 record: record_settings(args.record_dir.as_deref(), args.record_camera),
                 ..TableOptions::default()
             };
-            let dlm_policy = match &args.policy {
-                Some(model) => (robot_agent::controllers::intention_net::read_card(model)?.kind
-                    == robot_agent::controllers::intention_net::ModelKind::Dlm)
-                    .then_some(model.as_path()),
-                None => None,
-            };
-            run.intention.dlm.measure = dlm_measure_for(args.dlm_measure, dlm_policy)?;
+            run.intention.dlm.measure = dlm_measure_for(args.dlm_measure, dlm_policy.as_deref())?;
             run
         },
         command: std::env::args().collect::<Vec<_>>().join(" "),

@@ -38,6 +38,26 @@ pub fn length_of(poses: &[Pose2D]) -> f64 {
     poses.windows(2).map(|w| w[0].distance_m(&w[1])).sum()
 }
 
+/// The point `d_m` of driven length along `poses`, between its poses, facing along the segment
+/// it lies on; the last pose past the end; `None` when empty.
+#[must_use]
+pub fn point_along(poses: &[Pose2D], d_m: f64) -> Option<Pose2D> {
+    let mut left = d_m;
+    for w in poses.windows(2) {
+        let seg = w[0].distance_m(&w[1]);
+        if seg > 1e-9 && left <= seg {
+            let t = left / seg;
+            return Some(Pose2D::new(
+                w[0].x_m + t * (w[1].x_m - w[0].x_m),
+                w[0].y_m + t * (w[1].y_m - w[0].y_m),
+                (w[1].y_m - w[0].y_m).atan2(w[1].x_m - w[0].x_m),
+            ));
+        }
+        left -= seg;
+    }
+    poses.last().copied()
+}
+
 /// Index of the pose of `path` nearest to `robot` (the first of equals); `None` when empty.
 #[must_use]
 pub fn nearest_index(path: &[Pose2D], robot: Pose2D) -> Option<usize> {

@@ -22,6 +22,8 @@
 //!   corner cuts of a few centimetres do not change it.
 
 use protocol::{Dlm, Pose2D};
+
+use crate::path::{length_of, point_along};
 use serde::{Deserialize, Serialize};
 
 /// How the DLM measures the turn of the path ahead (see the module docs).
@@ -185,9 +187,13 @@ impl DlmParams {
 /// remaining path length from the closest path point. `None` for an empty path.
 #[must_use]
 pub fn curvature_ahead(path: &[Pose2D], robot: Pose2D, window_m: f64) -> Option<(f64, f64)> {
-    let closest = crate::path::nearest_index(path, robot)?;
-    let rest = &path[closest..];
-    let remaining_m: f64 = rest.windows(2).map(|w| w[0].distance_m(&w[1])).sum();
+    let rest = &path[crate::path::nearest_index(path, robot)?..];
+    Some((curvature_of(rest, robot, window_m), length_of(rest)))
+}
+
+/// [`curvature_ahead`]'s curvature, for `rest`, the path from the point closest to the robot on
+/// (not empty).
+fn curvature_of(rest: &[Pose2D], robot: Pose2D, window_m: f64) -> f64 {
     let mut acc = 0.0;
     let mut target = rest[rest.len() - 1];
     for w in rest.windows(2) {
@@ -204,21 +210,18 @@ pub fn curvature_ahead(path: &[Pose2D], robot: Pose2D, window_m: f64) -> Option<
     let left = -s * dx + c * dy;
     let d_sq = fwd * fwd + left * left;
     if d_sq < 1e-12 {
-        return Some((0.0, remaining_m));
+        return 0.0;
     }
     if fwd < 0.0 {
         // Behind the robot: a turn whatever the threshold, towards the point's side (left,
         // counter-clockwise, when straight behind).
-        return Some((
-            if left >= -1e-9 {
-                f64::INFINITY
-            } else {
-                f64::NEG_INFINITY
-            },
-            remaining_m,
-        ));
+        return if left >= -1e-9 {
+            f64::INFINITY
+        } else {
+            f64::NEG_INFINITY
+        };
     }
-    Some((2.0 * left / d_sq, remaining_m))
+    2.0 * left / d_sq
 }
 
 /// The DLM for a robot at `robot` following `path` with no DLM before it (see the module
@@ -236,14 +239,13 @@ pub fn next_dlm(path: &[Pose2D], robot: Pose2D, params: &DlmParams, previous: Op
         return Dlm::Stop;
     };
     let rest = &path[closest..];
-    let remaining_m: f64 = rest.windows(2).map(|w| w[0].distance_m(&w[1])).sum();
     let to_end = path.last().map_or(0.0, |g| g.distance_m(&robot));
-    if remaining_m.max(to_end) <= params.stop_distance_m {
+    if length_of(rest).max(to_end) <= params.stop_distance_m {
         return Dlm::Stop;
     }
     match params.measure {
         DlmMeasure::Curvature => {
-            let (kappa, _) = curvature_ahead(path, robot, params.window_m).unwrap_or((0.0, 0.0));
+            let kappa = curvature_of(rest, robot, params.window_m);
             if kappa.abs() < params.curvature_threshold_per_m {
                 Dlm::GoForward
             } else if kappa > 0.0 {
@@ -274,8 +276,12 @@ pub fn heading_ahead_rad(rest: &[Pose2D], robot: Pose2D, params: &DlmParams) -> 
     let (Some(first), Some(last)) = (rest.first(), rest.last()) else {
         return 0.0;
     };
-    let start = point_along(rest, params.heading_start_m);
-    let end = point_along(rest, params.heading_start_m + params.heading_chord_m);
+    let (Some(start), Some(end)) = (
+        point_along(rest, params.heading_start_m),
+        point_along(rest, params.heading_start_m + params.heading_chord_m),
+    ) else {
+        return 0.0;
+    };
     let (from, to) = if start.distance_m(&end) >= 0.5 * params.heading_chord_m {
         (start, end)
     } else if first.distance_m(last) >= 0.05 {
@@ -285,24 +291,6 @@ pub fn heading_ahead_rad(rest: &[Pose2D], robot: Pose2D, params: &DlmParams) -> 
     };
     let direction = (to.y_m - from.y_m).atan2(to.x_m - from.x_m);
     protocol::normalize_angle(direction - robot.yaw_rad)
-}
-
-/// The point `d_m` of arc length along `path` (its last point past the end).
-fn point_along(path: &[Pose2D], d_m: f64) -> Pose2D {
-    let mut left = d_m;
-    for w in path.windows(2) {
-        let seg = w[0].distance_m(&w[1]);
-        if seg > 1e-12 && left <= seg {
-            let t = left / seg;
-            return Pose2D::new(
-                w[0].x_m + t * (w[1].x_m - w[0].x_m),
-                w[0].y_m + t * (w[1].y_m - w[0].y_m),
-                w[1].yaw_rad,
-            );
-        }
-        left -= seg;
-    }
-    path.last().copied().unwrap_or(Pose2D::new(0.0, 0.0, 0.0))
 }
 
 #[cfg(test)]

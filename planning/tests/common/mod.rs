@@ -19,19 +19,6 @@ pub fn estimate(pose: Pose2D, seq: u64) -> PoseEstimate {
 }
 
 /// The point `d_m` along `path`, facing along its segment.
-pub fn along(path: &[Pose2D], mut d_m: f64) -> Pose2D {
-    for w in path.windows(2) {
-        let seg = w[0].distance_m(&w[1]);
-        if seg > 1e-9 && d_m <= seg {
-            let t = d_m / seg;
-            let yaw = (w[1].y_m - w[0].y_m).atan2(w[1].x_m - w[0].x_m);
-            return Pose2D::new(
-                w[0].x_m + t * (w[1].x_m - w[0].x_m),
-                w[0].y_m + t * (w[1].y_m - w[0].y_m),
-                yaw,
-            );
-        }
-        d_m -= seg;
-    }
-    *path.last().unwrap()
+pub fn along(path: &[Pose2D], d_m: f64) -> Pose2D {
+    planning::path::point_along(path, d_m).unwrap()
 }
