@@ -196,8 +196,13 @@ pub struct TableArgs {
     /// Also record the camera (JPEG) in the run logs.
     #[arg(long, requires = "record_dir")]
     record_camera: bool,
-    /// The intention pipeline keeps a robot's path while it holds (`[path_reuse]` on) instead
-    /// of a new search every cycle: the closed-loop check of issue 16's cheaper replanning.
+    /// A new hybrid-A* search every cycle (`[path_reuse]` off): the paper's replanning, and
+    /// the reference path reuse is measured against. Default: the service's default, a robot's
+    /// path kept while it holds.
+    #[arg(long, conflicts_with = "path_reuse")]
+    full_replanning: bool,
+    /// Kept paths while they hold (`[path_reuse]` on), the default since 2026-11-27; the flag
+    /// stays for the commands written when it was not.
     #[arg(long)]
     path_reuse: bool,
     /// Hands each controller's command to the base unchecked, without the agent's collision
@@ -220,6 +225,15 @@ pub struct TableArgs {
     /// value that contradicts the card is refused.
     #[arg(long)]
     dlm_measure: Option<DlmMeasure>,
+}
+
+impl TableArgs {
+    /// Whether the table's intention pipeline keeps paths while they hold (`[path_reuse]`):
+    /// the service's default unless `--full-replanning` (the two flags conflict, so
+    /// `--path-reuse` only says the default).
+    fn keeps_paths(&self) -> bool {
+        self.path_reuse || !self.full_replanning
+    }
 }
 
 /// Arguments of `eval record`.
@@ -383,7 +397,7 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
             let mut run = TableOptions {
                 agent: read_agent_config(args.config.as_deref())?,
                 record: record_settings(args.record_dir.as_deref(), args.record_camera),
-                ..TableOptions::default()
+                ..crate::record::recording_run_options()
             };
             run.intention.dlm.measure = dlm_measure_for(args.dlm_measure, dlm_policy.as_deref())?;
             run
@@ -516,7 +530,7 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
     let options = TableOptions {
         intention: {
             let mut intention = options.intention;
-            intention.reuse.enabled = args.path_reuse;
+            intention.reuse.enabled = args.keeps_paths();
             intention.dlm.measure = dlm_measure_for(
                 args.dlm_measure,
                 methods
@@ -620,6 +634,7 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
         simulated_s,
         wall_s,
         jobs,
+        path_reuse: options.intention.reuse.enabled,
     };
     table::report::write_tables(&args.out, &results, &summary)?;
     table::report::write_figures(&args.out, &prepared, &summary.methods, &outcome)?;
@@ -805,6 +820,26 @@ mod tests {
         assert_eq!(dlm_measure_for(None, None).unwrap(), DlmMeasure::Heading);
         let missing = test_support::models_dir().join("no-such-model.onnx");
         assert!(dlm_measure_for(None, Some(&missing)).is_err());
+    }
+
+    #[test]
+    fn tables_keep_paths_unless_told_to_search_every_cycle() {
+        let table = |flags: &[&str]| {
+            let mut argv = vec!["eval", "table", "--out", "t"];
+            argv.extend_from_slice(flags);
+            match Cli::try_parse_from(argv).map(|c| c.command) {
+                Ok(Cmd::Table(args)) => Ok(args.keeps_paths()),
+                Ok(other) => panic!("{other:?}"),
+                Err(e) => Err(e.kind()),
+            }
+        };
+        assert_eq!(table(&[]), Ok(true));
+        assert_eq!(table(&["--path-reuse"]), Ok(true));
+        assert_eq!(table(&["--full-replanning"]), Ok(false));
+        assert_eq!(
+            table(&["--full-replanning", "--path-reuse"]),
+            Err(clap::error::ErrorKind::ArgumentConflict)
+        );
     }
 
     #[test]

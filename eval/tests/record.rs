@@ -217,6 +217,13 @@ fn a_short_recording_has_the_documented_files_and_values() {
     assert_eq!(curvature_index["dlm_params"]["measure"], "curvature");
     assert_eq!(curvature_fields["label"], fields["label"]);
     assert_eq!(curvature_fields["camera"], fields["camera"]);
+
+    // Labels come from a new search every cycle, whatever the service's default; kept paths
+    // would be another dataset.
+    assert!(!options(1.0, 2).run.intention.reuse.enabled);
+    let mut kept = options(1.0, 2);
+    kept.run.intention.reuse.enabled = true;
+    assert_ne!(kept.dataset_id().unwrap(), summary.dataset_id);
 }
 
 #[test]

@@ -63,6 +63,7 @@ impl Tally {
 fn drive(map: &Arc<PlanningMap>, name: &str, routes: usize, measure: DlmMeasure) -> Tally {
     let mut config = IntentionConfig::default();
     config.dlm.measure = measure;
+    config.reuse.enabled = false;
     let mut reuse = config.clone();
     reuse.reuse.enabled = true;
     let mut t = Tally::default();

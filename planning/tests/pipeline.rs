@@ -150,10 +150,11 @@ impl Agreement {
 /// Drives six depot routes with path reuse and, at every cycle, answers the same pose with a
 /// new search too (and a new search from other jitter, the reference's own repeatability).
 fn kept_against_new(dlm: DlmParams) -> Agreement {
-    let fresh_config = IntentionConfig {
+    let mut fresh_config = IntentionConfig {
         dlm,
         ..IntentionConfig::default()
     };
+    fresh_config.reuse.enabled = false;
     let mut reuse_config = fresh_config.clone();
     reuse_config.reuse.enabled = true;
     let map =
@@ -206,7 +207,7 @@ fn kept_against_new(dlm: DlmParams) -> Agreement {
             {
                 same_reference += u32::from(c.dlm == a.dlm);
             }
-            assert!(!a.reused, "reuse is off by default");
+            assert!(!a.reused, "the reference searches every cycle");
             assert!(
                 b.path[0].distance_m(&reported) < 1e-9,
                 "the path starts at the robot"

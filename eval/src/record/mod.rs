@@ -108,6 +108,17 @@ pub struct RecordOptions {
     pub command: String,
 }
 
+/// The closed-loop options a recording runs with: the table's, but labelled from a new search
+/// every cycle (`[path_reuse]` off), as the paper's planner does and as every recording was
+/// made before path reuse became the service's default, so their dataset ids still describe
+/// what the same command records. A recording with reuse on hashes it into its id.
+#[must_use]
+pub fn recording_run_options() -> TableOptions {
+    let mut run = TableOptions::default();
+    run.intention.reuse.enabled = false;
+    run
+}
+
 impl Default for RecordOptions {
     fn default() -> Self {
         Self {
@@ -126,7 +137,7 @@ impl Default for RecordOptions {
             shard_samples: 5000,
             policy: None,
             max_wall_s: None,
-            run: TableOptions::default(),
+            run: recording_run_options(),
             command: String::new(),
         }
     }
@@ -340,6 +351,9 @@ impl RecordOptions {
             // are not the curvature DLM's, so the ids of recordings made before the DLM had a
             // measure stay as they were).
             h.update(format!("dlm {:?}\n", self.run.intention.dlm).as_bytes());
+        }
+        if self.run.intention.reuse.enabled {
+            h.update(format!("path_reuse {:?}\n", self.run.intention.reuse).as_bytes());
         }
         if self.encounters > 0.0 {
             // The kinds too: a recording with a kind added is other data at the same P.

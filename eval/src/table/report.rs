@@ -111,6 +111,11 @@ pub struct Table {
     pub simulated_s: f64,
     pub wall_s: f64,
     pub jobs: usize,
+    /// Whether the intention pipeline kept paths while they held (`[path_reuse]`); absent in
+    /// tables made before it was the default, all of which searched every cycle unless their
+    /// command said `--path-reuse`.
+    #[serde(default)]
+    pub path_reuse: bool,
 }
 
 impl Table {
