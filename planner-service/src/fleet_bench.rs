@@ -740,7 +740,7 @@ pub async fn run_robots(
                 )
             };
             if !idle {
-                if let Some(p) = path.and_then(|p| advance(&p, step_m)) {
+                if let Some(p) = path.and_then(|p| planning::path::point_along(&p, step_m)) {
                     r.pose = p;
                 }
             }
@@ -788,24 +788,6 @@ async fn publish_pose(
     protocol::zenoh_io::publish(&r.publisher, &msg)
         .await
         .map_err(setup)
-}
-
-/// The pose exactly `step_m` along `path` (interpolated: intentions carry a thinned path).
-fn advance(path: &[Pose2D], step_m: f64) -> Option<Pose2D> {
-    let mut left = step_m;
-    for w in path.windows(2) {
-        let d = w[0].distance_m(&w[1]);
-        if d >= left && d > 0.0 {
-            let t = left / d;
-            return Some(Pose2D::new(
-                w[0].x_m + t * (w[1].x_m - w[0].x_m),
-                w[0].y_m + t * (w[1].y_m - w[0].y_m),
-                (w[1].y_m - w[0].y_m).atan2(w[1].x_m - w[0].x_m),
-            ));
-        }
-        left -= d;
-    }
-    path.last().copied()
 }
 
 /// The planner alone: every robot replans 20 times from poses along its first path.
