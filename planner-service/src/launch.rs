@@ -583,10 +583,10 @@ struct AgentStart<'a> {
 
 /// The command of a robot's agent. It connects to the service's endpoints and to the
 /// simulator's (`sim_endpoints`, from the roster): Zenoh reconnects configured endpoints when a
-/// link drops, and a link to a peer met by gossip stays lost. Zenoh 1.10's TLS links do drop
-/// now and then under traffic both ways (eclipse-zenoh/zenoh#2557: "TX task failed: handshake
-/// not complete"), and the lost link between a base and its agent used to leave that robot
-/// without sensors for good.
+/// link drops, and a link to a peer met by gossip stays lost. Zenoh 1.10.2's TLS links dropped
+/// now and then under traffic both ways (eclipse-zenoh/zenoh#2557, patched in
+/// `third_party/zenoh-link-tls`), and the lost link between a base and its agent used to leave
+/// that robot without sensors for good; a link can still drop for other reasons.
 fn agent_command(
     bin: &Path,
     spec: &RobotsSpec,
