@@ -15,7 +15,7 @@ use crate::fleet::FleetConfig;
 use crate::restart::{RestartPolicy, RestartPolicyError};
 use planning::intention::dlm::DlmParamsError;
 use planning::intention::{DlmParams, LpeParams};
-use planning::{PlanError, PlannerConfig, ReuseParams};
+use planning::{AvoidParams, PlanError, PlannerConfig, ReuseParams};
 use protocol::{LpeParamsError, SessionArgs, SessionError, SessionMode, SiteId};
 
 /// The whole configuration file.
@@ -27,6 +27,9 @@ pub struct ServiceConfig {
     pub lpe: LpeParams,
     /// When a robot's previous plan answers instead of a new search (`[path_reuse]`).
     pub path_reuse: ReuseParams,
+    /// How plans keep clear of the fleet's other robots (`[other_robots]`; which robots:
+    /// `[fleet] neighbour_radius_m`).
+    pub other_robots: AvoidParams,
     pub http: HttpConfig,
     pub zenoh: ZenohConfig,
     /// The fleet core (`[fleet]`): goal tolerance, timeouts of silent robots and paused tasks.
@@ -382,6 +385,7 @@ impl ServiceConfig {
             path_spacing_m: self.fleet.intention_path_spacing_m,
             trail_poses: self.fleet.trail_poses,
             reuse: self.path_reuse.clone(),
+            avoid: self.other_robots.clone(),
         }
     }
 
@@ -422,6 +426,7 @@ impl ServiceConfig {
         self.dlm.validate()?;
         self.lpe.validate()?;
         self.path_reuse.validate()?;
+        self.other_robots.validate()?;
         self.http.validate()?;
         self.zenoh.session_config()?;
         self.fleet.validate()?;

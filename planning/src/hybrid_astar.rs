@@ -26,7 +26,7 @@ use crate::config::PlannerConfig;
 use crate::dubins::DubinsPath;
 use crate::error::{Endpoint, PlanError};
 use crate::heuristic::{MinKey, ObstacleHeuristic};
-use crate::map::{GridPose, PlanningMap};
+use crate::map::{Disc, GridPose, PlanningMap};
 use crate::path::{Path, PathStats};
 use crate::smoother;
 
@@ -125,6 +125,10 @@ pub struct Planner {
     nodes: Vec<Node>,
     open: BinaryHeap<MinKey>,
     lattice: LatticeMap,
+    /// Obstacles on top of the map for the plan under way ([`Self::plan_avoiding`]).
+    avoid: Vec<Disc>,
+    /// The time budget of the plan under way, when not the configured one.
+    budget_ms: Option<u64>,
 }
 
 impl Planner {
@@ -149,6 +153,8 @@ impl Planner {
             nodes: Vec::new(),
             open: BinaryHeap::new(),
             lattice: LatticeMap::default(),
+            avoid: Vec::new(),
+            budget_ms: None,
         })
     }
 
@@ -224,6 +230,45 @@ impl Planner {
     /// (with its clearance), the goal unreachable (with the states explored), or the budget
     /// exceeded.
     pub fn plan(&mut self, start: Pose2D, goal: Pose2D) -> Result<Path, PlanError> {
+        self.avoid.clear();
+        self.budget_ms = None;
+        self.plan_inner(start, goal)
+    }
+
+    /// [`Self::plan`] keeping out of `discs` (map frame, e.g. other robots) as well as the
+    /// map's obstacles, within `budget_ms` instead of the configured budget. The obstacle
+    /// heuristic still comes from the map alone (the discs only add cost, so it stays
+    /// admissible); a disc that closes the way makes the search fail, by exhausting the
+    /// reachable states or the budget.
+    ///
+    /// # Errors
+    /// As [`Self::plan`].
+    pub fn plan_avoiding(
+        &mut self,
+        start: Pose2D,
+        goal: Pose2D,
+        discs: &[Disc],
+        budget_ms: u64,
+    ) -> Result<Path, PlanError> {
+        self.avoid = discs
+            .iter()
+            .map(|d| {
+                let c = self.map.to_grid(Pose2D::new(d.x_m, d.y_m, 0.0));
+                Disc {
+                    x_m: c.x_m,
+                    y_m: c.y_m,
+                    radius_m: d.radius_m,
+                }
+            })
+            .collect();
+        self.budget_ms = Some(budget_ms);
+        let planned = self.plan_inner(start, goal);
+        self.avoid.clear();
+        self.budget_ms = None;
+        planned
+    }
+
+    fn plan_inner(&mut self, start: Pose2D, goal: Pose2D) -> Result<Path, PlanError> {
         let t0 = Instant::now();
         let map = Arc::clone(&self.map);
         let s = map.check_endpoint(Endpoint::Start, start)?;
@@ -252,6 +297,7 @@ impl Planner {
         if self.config.smooth {
             grid_poses = smoother::shortcut(
                 &map,
+                &self.avoid,
                 &grid_poses,
                 self.config.min_turning_radius_m,
                 self.config.path_spacing_m,
@@ -297,7 +343,8 @@ impl Planner {
         self.open.clear();
         self.lattice.clear();
         let w = self.config.heuristic_weight;
-        let budget = std::time::Duration::from_millis(self.config.time_budget_ms);
+        let budget =
+            std::time::Duration::from_millis(self.budget_ms.unwrap_or(self.config.time_budget_ms));
         let rho = self.config.min_turning_radius_m;
         let goal_q = (goal.x_m, goal.y_m, goal.yaw_rad);
 
@@ -366,12 +413,15 @@ impl Planner {
                 || n.h_obstacle < self.config.analytic_near_goal_m
             {
                 if let Some(d) = DubinsPath::shortest((n.x, n.y, n.yaw), goal_q, rho) {
-                    let free = self
-                        .map
-                        .curve_free(d.length_m(), self.config.path_spacing_m, |t| {
+                    let free = self.map.curve_free_among(
+                        &self.avoid,
+                        d.length_m(),
+                        self.config.path_spacing_m,
+                        |t| {
                             let q = d.sample(t);
                             (q.0, q.1)
-                        });
+                        },
+                    );
                     if free {
                         return Ok((Ending::Analytic(ni, d), expanded));
                     }
@@ -401,12 +451,15 @@ impl Planner {
                     }
                 }
                 if prim.rotate_rad == 0.0 {
-                    let free =
-                        self.map
-                            .curve_free(prim.length_m.abs(), self.config.path_spacing_m, |t| {
-                                let q = prim.apply(n.x, n.y, n.yaw, t / prim.length_m.abs());
-                                (q.0, q.1)
-                            });
+                    let free = self.map.curve_free_among(
+                        &self.avoid,
+                        prim.length_m.abs(),
+                        self.config.path_spacing_m,
+                        |t| {
+                            let q = prim.apply(n.x, n.y, n.yaw, t / prim.length_m.abs());
+                            (q.0, q.1)
+                        },
+                    );
                     if !free {
                         continue;
                     }

@@ -32,8 +32,8 @@ pub use error::{Endpoint, PlanError};
 pub use goals::{Advance, Goal, GoalProgress};
 pub use hybrid_astar::Planner;
 pub use intention::{
-    stop_intention, Answer, DlmMeasure, DlmParams, IntentionConfig, IntentionPlanner, LpeImage,
-    LpeParams, Planned, RefreshJob, Refreshed, ReuseParams,
+    stop_intention, Answer, AvoidParams, DlmMeasure, DlmParams, IntentionConfig, IntentionPlanner,
+    LpeImage, LpeParams, Planned, RefreshJob, Refreshed, ReuseParams,
 };
-pub use map::{MapKey, PlanningMap};
+pub use map::{Disc, MapKey, PlanningMap};
 pub use path::{Path, PathStats};

@@ -68,6 +68,25 @@ pub struct PlanningMap {
     misses: AtomicU64,
 }
 
+/// A disc the robot must keep out of, on top of the floor plan (another robot of the fleet),
+/// in the grid frame: the robot's centre stays at least `radius_m` plus the robot's own radius
+/// from its centre.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Disc {
+    pub x_m: f64,
+    pub y_m: f64,
+    pub radius_m: f64,
+}
+
+impl Disc {
+    /// Distance from a grid-frame point to the disc's edge (negative inside).
+    #[inline]
+    #[must_use]
+    pub fn gap_m(&self, x_m: f64, y_m: f64) -> f64 {
+        (x_m - self.x_m).hypot(y_m - self.y_m) - self.radius_m
+    }
+}
+
 /// A pose in the grid frame: metres from the grid origin along the grid axes.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GridPose {
@@ -166,13 +185,25 @@ impl PlanningMap {
         spacing_m: f64,
         at: impl Fn(f64) -> (f64, f64),
     ) -> bool {
+        self.curve_free_among(&[], length_m, spacing_m, at)
+    }
+
+    /// [`Self::curve_free`] with `discs` (grid frame) as obstacles too. The distance to a
+    /// disc's edge is 1-Lipschitz like the field, so the same sphere tracing holds.
+    pub fn curve_free_among(
+        &self,
+        discs: &[Disc],
+        length_m: f64,
+        spacing_m: f64,
+        at: impl Fn(f64) -> (f64, f64),
+    ) -> bool {
         let res = self.grid.resolution_m();
         let slack = res * std::f64::consts::SQRT_2;
         let (w_m, h_m) = self.grid.extent_m();
         let mut s = 0.0;
         loop {
             let (x, y) = at(s);
-            let c = self.clearance_m(x, y);
+            let c = self.clearance_among(discs, x, y);
             if c < self.robot_radius_m {
                 return false;
             }
@@ -192,7 +223,7 @@ impl PlanningMap {
         let mut j = 1.0;
         while j < steps {
             let (x, y) = at(length_m * j / steps);
-            if !self.is_free(x, y) {
+            if self.clearance_among(discs, x, y) < self.robot_radius_m {
                 return false;
             }
             j += 1.0;
@@ -240,6 +271,15 @@ impl PlanningMap {
     pub fn clearance_m(&self, x_m: f64, y_m: f64) -> f64 {
         let (cx, cy) = self.cell_of(x_m, y_m);
         f64::from(self.distance.at(cx, cy))
+    }
+
+    /// [`Self::clearance_m`], or the distance to the nearest of `discs`' edges if less.
+    #[inline]
+    #[must_use]
+    pub fn clearance_among(&self, discs: &[Disc], x_m: f64, y_m: f64) -> f64 {
+        discs
+            .iter()
+            .fold(self.clearance_m(x_m, y_m), |c, d| c.min(d.gap_m(x_m, y_m)))
     }
 
     /// Whether a robot centred at this grid-frame point is collision-free.

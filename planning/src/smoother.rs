@@ -10,16 +10,18 @@
 use protocol::normalize_angle;
 
 use crate::dubins::DubinsPath;
-use crate::map::{GridPose, PlanningMap};
+use crate::map::{Disc, GridPose, PlanningMap};
 
 /// Poses copied unchanged when no shortcut starts at a pose: a shortcut spanning fewer poses
 /// than this would gain almost nothing.
 const MIN_SPAN: usize = 8;
 
-/// The shortcut-smoothed path (see the module docs); endpoints are kept exactly.
+/// The shortcut-smoothed path (see the module docs), keeping out of `discs` (grid frame) as
+/// well as the map's obstacles; endpoints are kept exactly.
 #[must_use]
 pub fn shortcut(
     map: &PlanningMap,
+    discs: &[Disc],
     poses: &[GridPose],
     rho_m: f64,
     spacing_m: f64,
@@ -49,7 +51,7 @@ pub fn shortcut(
                 // Chords understate the stretch's length by less than this, so a shortcut that
                 // is not shorter by more is not worth it.
                 if d.length_m() + 1e-3 < cum[j] - cum[i]
-                    && map.curve_free(d.length_m(), spacing_m, |t| {
+                    && map.curve_free_among(discs, d.length_m(), spacing_m, |t| {
                         let q = d.sample(t);
                         (q.0, q.1)
                     })

@@ -481,3 +481,180 @@ fn planned(p: &mut IntentionPlanner, pose: Pose2D, goals: &[Goal]) -> planning::
         Answer::Done => panic!("not done at {pose:?}"),
     }
 }
+
+/// The corridor of the parked-robot scenario (sim/scenarios/behaviour_robot_parked.yaml): the
+/// robot starts at (2, 5.2) facing a goal at (25.5, 5.2) down the corridor.
+fn corridor_planner() -> IntentionPlanner {
+    let config = IntentionConfig::default();
+    let grid = map_core::load_ros_map(
+        &test_support::scenarios_dir().join("maps/corridor.yaml"),
+        &map_core::ImportLimits::default(),
+    )
+    .unwrap()
+    .grid;
+    let map = Arc::new(PlanningMap::new(grid, &config.planner).unwrap());
+    IntentionPlanner::new(map, config).unwrap()
+}
+
+/// Closest approach of `path` to `point`.
+fn closest_m(path: &[Pose2D], point: Pose2D) -> f64 {
+    path.iter()
+        .map(|p| p.distance_m(&point))
+        .fold(f64::INFINITY, f64::min)
+}
+
+#[test]
+fn a_plan_keeps_clear_of_another_robot_in_the_corridor() {
+    let goals = [Goal::at(25.5, 5.2)];
+    let progress = GoalProgress::new(&goals, 0);
+    let start = estimate(Pose2D::new(2.0, 5.2, 0.0), 1);
+    // The robot of the scenario, parked on the corridor's centre line.
+    let other = Pose2D::new(12.0, 5.2, std::f64::consts::PI);
+
+    let mut alone = corridor_planner();
+    let Answer::Heading {
+        plan: Ok(blind), ..
+    } = alone.answer(&start, &progress, false)
+    else {
+        panic!("no plan on the floor plan");
+    };
+    assert!(closest_m(&blind.path, other) < 0.2, "runs through it");
+    assert_eq!(blind.avoided_robots, 0);
+
+    let mut among = corridor_planner();
+    let Answer::Heading {
+        plan: Ok(round), ..
+    } = among.answer_among(&start, &progress, false, &[other])
+    else {
+        panic!("no plan round the other robot");
+    };
+    let config = IntentionConfig::default();
+    let berth_m = config.avoid.radius_m + config.planner.robot_radius_m;
+    // Every pose of the full path keeps the berth; the thinned one may cut a chord by a hair.
+    assert!(
+        closest_m(&round.path, other) >= berth_m - 0.02,
+        "{} m from the other robot",
+        closest_m(&round.path, other)
+    );
+    assert_eq!(round.avoided_robots, 1);
+    assert!(
+        round.length_m < blind.length_m + 1.0,
+        "a detour, not a tour"
+    );
+
+    // Kept while it holds; a robot that steps onto the kept path sends it to a new search.
+    let next = estimate(along(&round.path, 0.05), 2);
+    let Answer::Heading { plan: Ok(kept), .. } =
+        among.answer_among(&next, &progress, false, &[other])
+    else {
+        panic!("no plan");
+    };
+    assert!(kept.reused);
+    let in_the_way = along(&round.path, 5.0);
+    let Answer::Heading {
+        plan: Ok(moved), ..
+    } = among.answer_among(&next, &progress, false, &[in_the_way])
+    else {
+        panic!("no plan");
+    };
+    assert!(!moved.reused);
+    assert!(closest_m(&moved.path, in_the_way) >= berth_m - 0.02);
+}
+
+#[test]
+fn a_robot_on_the_goal_or_filling_the_way_leaves_the_plan_on_the_floor_plan() {
+    let goals = [Goal::at(25.5, 5.2)];
+    let progress = GoalProgress::new(&goals, 0);
+    let start = estimate(Pose2D::new(2.0, 5.2, 0.0), 1);
+    let mut planner = corridor_planner();
+    // On the goal: no path could end there, so the plan goes there all the same.
+    let Answer::Heading {
+        plan: Ok(to_goal), ..
+    } = planner.answer_among(&start, &progress, false, &[Pose2D::new(25.4, 5.2, 0.0)])
+    else {
+        panic!("no plan");
+    };
+    assert_eq!(to_goal.avoided_robots, 0);
+    // A wall of robots across the corridor: the search round them fails within its budget
+    // and the plan on the floor plan answers (the collision monitor holds the robot back).
+    let wall: Vec<Pose2D> = (0..8)
+        .map(|i| Pose2D::new(12.0, 3.0 + 0.5 * f64::from(i), 0.0))
+        .collect();
+    let mut blocked = corridor_planner();
+    let Answer::Heading {
+        plan: Ok(through), ..
+    } = blocked.answer_among(&start, &progress, false, &wall)
+    else {
+        panic!("no plan");
+    };
+    assert_eq!(through.avoided_robots, 0);
+    assert!(closest_m(&through.path, Pose2D::new(12.0, 5.2, 0.0)) < 0.3);
+}
+
+/// Two robots sent towards each other down the bottom corridor of the junctions floor plan (2 m
+/// wide), each following its answered path exactly at 0.5 m/s and 10 Hz, each planner given
+/// the other's pose: both keep right and pass with room between them. On the floor plan alone
+/// they drive into each other.
+#[test]
+fn two_robots_meeting_head_on_pass_each_other() {
+    let config = IntentionConfig::default();
+    let grid = map_core::load_ros_map(
+        &test_support::scenarios_dir().join("maps/junctions.yaml"),
+        &map_core::ImportLimits::default(),
+    )
+    .unwrap()
+    .grid;
+    let map = Arc::new(PlanningMap::new(grid, &config.planner).unwrap());
+    let drive = |among: bool| -> (f64, [bool; 2]) {
+        let mut robots = [
+            Pose2D::new(4.0, 4.0, 0.0),
+            Pose2D::new(20.0, 4.0, std::f64::consts::PI),
+        ];
+        let goals = [[Goal::at(20.0, 4.0)], [Goal::at(4.0, 4.0)]];
+        let mut planners = [
+            IntentionPlanner::new(Arc::clone(&map), config.clone()).unwrap(),
+            IntentionPlanner::new(Arc::clone(&map), config.clone()).unwrap(),
+        ];
+        let mut closest_m = f64::INFINITY;
+        let mut done = [false, false];
+        for step in 0..600_u64 {
+            let before = robots;
+            for i in 0..2 {
+                if done[i] {
+                    continue;
+                }
+                let others = if among {
+                    vec![before[1 - i]]
+                } else {
+                    Vec::new()
+                };
+                match planners[i].answer_among(
+                    &estimate(before[i], step),
+                    &GoalProgress::new(&goals[i], 0),
+                    false,
+                    &others,
+                ) {
+                    Answer::Heading { plan: Ok(p), .. } => robots[i] = along(&p.path, 0.05),
+                    Answer::Heading { plan: Err(e), .. } => panic!("robot {i}: {e}"),
+                    Answer::Done => done[i] = true,
+                }
+            }
+            closest_m = closest_m.min(robots[0].distance_m(&robots[1]));
+            if done == [true, true] {
+                break;
+            }
+        }
+        (closest_m, done)
+    };
+    let (blind_m, _) = drive(false);
+    assert!(
+        blind_m < 0.5,
+        "on the floor plan alone they meet: {blind_m} m"
+    );
+    let (passing_m, done) = drive(true);
+    assert_eq!(done, [true, true]);
+    // Two 0.25 m robots touch at 0.5 m between centres; the berth is 0.65 m (0.15 m between
+    // them), kept to within the path's 5 cm steps.
+    let berth_m = config.avoid.radius_m + config.planner.robot_radius_m;
+    assert!(passing_m >= berth_m - 0.03, "closest {passing_m} m");
+}

@@ -38,6 +38,9 @@ pub struct FleetConfig {
     pub retain_finished_max: u64,
     /// How often finished tasks are swept.
     pub retention_sweep_interval_s: u64,
+    /// Other online robots on the same map within this distance of a robot are given to its
+    /// planner, which keeps its path clear of them (`[other_robots]`); 0 gives none.
+    pub neighbour_radius_m: f64,
 }
 
 impl Default for FleetConfig {
@@ -57,6 +60,7 @@ impl Default for FleetConfig {
             retain_finished_s: 30 * 24 * 3600,
             retain_finished_max: 100_000,
             retention_sweep_interval_s: 60,
+            neighbour_radius_m: 4.0,
         }
     }
 }
@@ -102,6 +106,14 @@ impl FleetConfig {
             return Err(InvalidFleetConfig::new(
                 "intention_path_spacing_m",
                 spacing,
+                "must be zero or positive",
+            ));
+        }
+        let radius = self.neighbour_radius_m;
+        if !(radius.is_finite() && radius >= 0.0) {
+            return Err(InvalidFleetConfig::new(
+                "neighbour_radius_m",
+                radius,
                 "must be zero or positive",
             ));
         }

@@ -10,7 +10,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use planning::LpeImage;
-use protocol::{AgentStatus, PoseEstimate, RobotId, TaskId};
+use protocol::{AgentStatus, Pose2D, PoseEstimate, RobotId, TaskId};
 
 use super::book::{Decision, Effect, TaskBook};
 use super::config::FleetConfig;
@@ -28,6 +28,10 @@ pub struct Cycle {
     pub render_lpe: bool,
     /// Send the image to the robot (its controller reads it).
     pub send_lpe: bool,
+    /// The other online robots on the robot's map within `[fleet] neighbour_radius_m`, which
+    /// its plan keeps clear of.
+    #[serde(default)]
+    pub neighbours: Vec<Pose2D>,
 }
 
 /// Robots online and offline at a watchdog round (before it marked the silent ones).
@@ -201,18 +205,41 @@ impl Core {
                 decision: Decision::Idle,
                 render_lpe: false,
                 send_lpe: false,
+                neighbours: Vec::new(),
             };
             return (idle, Vec::new());
         };
         let send_lpe = robot.wants_lpe();
         let render_lpe = self.registry.lpe_due(id, now.at, watched);
         let (decision, effects) = self.book.advance(id, pose, &self.registry, now);
+        let neighbours = if matches!(decision, Decision::Plan { .. }) {
+            self.neighbours(id, pose)
+        } else {
+            Vec::new()
+        };
         let cycle = Cycle {
             decision,
             render_lpe,
             send_lpe,
+            neighbours,
         };
         (cycle, effects)
+    }
+
+    /// The other online robots on `pose`'s map within `[fleet] neighbour_radius_m` of it.
+    fn neighbours(&self, id: &RobotId, pose: &PoseEstimate) -> Vec<Pose2D> {
+        let radius_m = self.config.neighbour_radius_m;
+        if radius_m <= 0.0 {
+            return Vec::new();
+        }
+        self.registry
+            .iter()
+            .filter(|r| r.online && &r.id != id)
+            .filter_map(|r| r.pose.as_ref())
+            .filter(|p| p.map.name == pose.map.name)
+            .map(|p| p.pose)
+            .filter(|p| p.distance_m(&pose.pose) <= radius_m)
+            .collect()
     }
 
     /// The end of a cycle that found a path: the intention that went out (if it did) and the

@@ -621,6 +621,7 @@ mod tests {
             },
             render_lpe: true,
             send_lpe: false,
+            neighbours: vec![Pose2D::new(3.0, 1.0, 0.5)],
         };
         let back: Cycle = protocol::decode(&protocol::encode(&order).unwrap()).unwrap();
         assert_eq!(back, order);

@@ -518,3 +518,56 @@ fn robot_events_are_made_only_for_watchers_and_at_most_every_interval() {
     let (_, effects) = core.status_arrived(&r, status(true), ms(t0, 130));
     assert_eq!(events(&effects), 0);
 }
+
+#[test]
+fn a_cycle_names_the_other_robots_near_it_on_its_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let t0 = Now::read();
+    let (mut core, _store, _) = open(dir.path(), t0);
+    let r1 = robot("robot_1");
+    core.pose_arrived(&r1, pose(3.0, 4.0), t0, false);
+    // Near on the same map, far on the same map, near on another map, and near but silent.
+    for (id, p) in [
+        ("near", pose(5.0, 4.5)),
+        ("far", pose(13.0, 10.0)),
+        ("elsewhere", pose_on("depot", 3.5, 4.0)),
+        ("silent", pose(3.0, 5.0)),
+    ] {
+        core.pose_arrived(&robot(id), p, t0, false);
+    }
+    core.create(new_task(Some("robot_1"), &[(13.0, 10.0)]), 1, t0)
+        .unwrap();
+    // "silent" sends nothing more and is marked offline by the watchdog.
+    let later = ms(t0, 700);
+    for id in ["robot_1", "near", "far", "elsewhere"] {
+        let p = match id {
+            "robot_1" => pose(3.0, 4.0),
+            "near" => pose(5.0, 4.5),
+            "far" => pose(13.0, 10.0),
+            _ => pose_on("depot", 3.5, 4.0),
+        };
+        core.pose_arrived(&robot(id), p, later, false);
+    }
+    core.watchdog(later);
+    let (cycle, _) = core.begin_cycle(&r1, &pose(3.0, 4.0), later, false);
+    assert!(matches!(cycle.decision, Decision::Plan { .. }));
+    assert_eq!(cycle.neighbours, vec![Pose2D::new(5.0, 4.5, 0.0)]);
+
+    // None to a robot with nothing to plan, and none when the radius is 0.
+    let (idle, _) = core.begin_cycle(&robot("near"), &pose(5.0, 4.5), later, false);
+    assert!(idle.neighbours.is_empty());
+    let dir = tempfile::tempdir().unwrap();
+    let store = Arc::new(TaskStore::open(dir.path()).unwrap());
+    let off = FleetConfig {
+        neighbour_radius_m: 0.0,
+        ..config()
+    };
+    let (mut core, _) = Core::open(store, off, t0).unwrap();
+    core.pose_arrived(&r1, pose(3.0, 4.0), t0, false);
+    core.pose_arrived(&robot("near"), pose(5.0, 4.5), t0, false);
+    core.create(new_task(Some("robot_1"), &[(13.0, 10.0)]), 1, t0)
+        .unwrap();
+    let (cycle, _) = core.begin_cycle(&r1, &pose(3.0, 4.0), t0, false);
+    assert!(matches!(cycle.decision, Decision::Plan { .. }));
+    assert!(cycle.neighbours.is_empty());
+}

@@ -338,9 +338,14 @@ fn plan(host: &impl CycleHost, id: &RobotId, arrival: &Arrival, cycle: Cycle, st
         host.finish(id, Outcome::Stopped { sent });
         return;
     };
-    let answer = st
-        .on_map(host, pose)
-        .map(|p| p.answer(pose, &GoalProgress::new(&goals, next), cycle.render_lpe));
+    let answer = st.on_map(host, pose).map(|p| {
+        p.answer_among(
+            pose,
+            &GoalProgress::new(&goals, next),
+            cycle.render_lpe,
+            &cycle.neighbours,
+        )
+    });
     let planned = match answer {
         Ok(Answer::Heading { goal_index, plan }) => {
             plan.map(|p| (goal_index, p))

@@ -4,12 +4,15 @@
 //! - [`lpe`]: the local path and environment image (224 x 224 RGB, heading-up).
 //! - [`pipeline`]: pose in, intention out: the one pipeline the service and the evaluation run.
 //! - [`reuse`]: when the previous plan answers instead of a new search.
+//! - [`avoid`]: plans that keep clear of the fleet's other robots.
 
+pub mod avoid;
 pub mod dlm;
 pub mod lpe;
 pub mod pipeline;
 pub mod reuse;
 
+pub use avoid::AvoidParams;
 pub use dlm::{dlm_from_path, next_dlm, DlmMeasure, DlmParams};
 pub use lpe::{render_lpe, LpeImage, LpeParams};
 pub use pipeline::{

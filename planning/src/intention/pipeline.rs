@@ -16,6 +16,7 @@ use crate::config::PlannerConfig;
 use crate::error::{Endpoint, PlanError};
 use crate::goals::{Advance, GoalProgress};
 use crate::hybrid_astar::Planner;
+use crate::intention::avoid::{path_clear_of, AvoidParams};
 use crate::intention::dlm::{next_dlm, DlmParams};
 use crate::intention::lpe::{render_lpe, LpeImage, LpeParams};
 use crate::intention::reuse::{KeptPlan, ReuseParams};
@@ -36,9 +37,12 @@ pub struct IntentionConfig {
     pub path_spacing_m: f64,
     /// Answered poses kept as the travelled part of the LPE image.
     pub trail_poses: usize,
-    /// When the previous plan answers instead of a new search (off by default).
+    /// When the previous plan answers instead of a new search.
     #[serde(default)]
     pub reuse: ReuseParams,
+    /// How plans keep clear of the fleet's other robots ([`IntentionPlanner::answer_among`]).
+    #[serde(default)]
+    pub avoid: AvoidParams,
 }
 
 impl Default for IntentionConfig {
@@ -51,6 +55,7 @@ impl Default for IntentionConfig {
             path_spacing_m: 0.2,
             trail_poses: 60,
             reuse: ReuseParams::default(),
+            avoid: AvoidParams::default(),
         }
     }
 }
@@ -81,6 +86,9 @@ pub struct Planned {
     pub lpe: Option<LpeImage>,
     /// The rest of the previous plan, no new search (see [`ReuseParams`]).
     pub reused: bool,
+    /// How many other robots the path keeps clear of (see [`AvoidParams`]): 0 when none was
+    /// near or no path round them was found.
+    pub avoided_robots: usize,
 }
 
 impl Planned {
@@ -150,6 +158,10 @@ pub struct IntentionPlanner {
     generation: u64,
     /// The DLM of the last answer, which the heading measure's hysteresis holds a turn on.
     last_dlm: Option<Dlm>,
+    /// Cycles left before a search round other robots is tried again after one failed.
+    avoid_paused: u32,
+    /// How many other robots the kept plan was searched round.
+    kept_avoided: usize,
 }
 
 /// Where the due new search of a kept plan stands.
@@ -174,6 +186,7 @@ impl IntentionPlanner {
         config.dlm.validate()?;
         config.lpe.validate()?;
         config.reuse.validate()?;
+        config.avoid.validate()?;
         if !(config.goal_tolerance_m.is_finite() && config.goal_tolerance_m > 0.0) {
             return Err(PlanError::invalid_config(
                 "goal_tolerance_m",
@@ -203,6 +216,8 @@ impl IntentionPlanner {
             refresh: Refresh::Idle,
             generation: 0,
             last_dlm: None,
+            avoid_paused: 0,
+            kept_avoided: 0,
         })
     }
 
@@ -289,6 +304,9 @@ impl IntentionPlanner {
                 if r.generation == self.generation {
                     self.generation += 1;
                     self.kept = Some(r.kept);
+                    // Searched on the floor plan alone; a robot in its way sends the next
+                    // answer to a search round it.
+                    self.kept_avoided = 0;
                 }
                 Ok(())
             }
@@ -335,6 +353,18 @@ impl IntentionPlanner {
         progress: &GoalProgress<'_>,
         render_lpe: bool,
     ) -> Answer {
+        self.answer_among(pose, progress, render_lpe, &[])
+    }
+
+    /// [`Self::answer`] for a robot of a fleet, with the poses of the other robots near it
+    /// (map frame, same map): the plan keeps clear of them where it can ([`AvoidParams`]).
+    pub fn answer_among(
+        &mut self,
+        pose: &PoseEstimate,
+        progress: &GoalProgress<'_>,
+        render_lpe: bool,
+        others: &[Pose2D],
+    ) -> Answer {
         let robot = pose.pose;
         self.trail.push_back(robot);
         while self.trail.len() > self.config.trail_poses {
@@ -352,7 +382,7 @@ impl IntentionPlanner {
                     .is_some_and(|g| g.yaw_rad.is_none());
                 Answer::Heading {
                     goal_index: index,
-                    plan: self.plan(robot, target, free_heading, render_lpe),
+                    plan: self.plan(robot, target, free_heading, render_lpe, others),
                 }
             }
         }
@@ -364,25 +394,34 @@ impl IntentionPlanner {
         goal: Pose2D,
         free_heading: bool,
         render_lpe: bool,
+        others: &[Pose2D],
     ) -> Result<Planned, PlanError> {
         // The caller did not take the search the last answer left due: it answers now.
         if let Refresh::Due(_) = self.refresh {
             self.drop_kept();
         }
-        let kept_rest = self.kept.as_mut().and_then(|k| {
-            k.follow(
-                self.fixed.map(),
-                robot,
-                goal,
-                free_heading,
-                &self.config.reuse,
-            )
-        });
+        let own_radius_m = self.config.planner.robot_radius_m;
+        let (discs, near) = self.config.avoid.discs(others, robot, goal, own_radius_m);
+        let kept_rest = self
+            .kept
+            .as_mut()
+            .and_then(|k| {
+                k.follow(
+                    self.fixed.map(),
+                    robot,
+                    goal,
+                    free_heading,
+                    &self.config.reuse,
+                )
+            })
+            // A kept path that another robot now stands on is searched again (round it).
+            .filter(|rest| path_clear_of(&rest.poses, &discs, own_radius_m));
         let reused = kept_rest.is_some();
         let (poses, length_m) = match kept_rest {
             Some(rest) => (rest.poses, rest.length_m),
             None => {
-                let path = self.search(robot, goal, free_heading)?;
+                let (path, avoided) = self.search_among(robot, goal, free_heading, &discs, near)?;
+                self.kept_avoided = avoided;
                 self.generation += 1;
                 self.kept = self.config.reuse.enabled.then(|| {
                     KeptPlan::new(
@@ -420,7 +459,35 @@ impl IntentionPlanner {
             dlm,
             lpe,
             reused,
+            avoided_robots: self.kept_avoided,
         })
+    }
+
+    /// A new search round `discs` (standing for `robots` other robots) when there are any and
+    /// the last such search did not fail within `retry_cycles`; else, or when it finds no
+    /// path, on the floor plan alone. Also how many robots the path keeps clear of.
+    fn search_among(
+        &mut self,
+        robot: Pose2D,
+        goal: Pose2D,
+        free_heading: bool,
+        discs: &[crate::map::Disc],
+        robots: usize,
+    ) -> Result<(Path, usize), PlanError> {
+        if !discs.is_empty() && self.avoid_paused == 0 {
+            let planner = if free_heading {
+                &mut self.free
+            } else {
+                &mut self.fixed
+            };
+            match planner.plan_avoiding(robot, goal, discs, self.config.avoid.budget_ms) {
+                Ok(path) => return Ok((path, robots)),
+                Err(_) => self.avoid_paused = self.config.avoid.retry_cycles,
+            }
+        } else {
+            self.avoid_paused = self.avoid_paused.saturating_sub(1);
+        }
+        self.search(robot, goal, free_heading).map(|p| (p, 0))
     }
 
     /// A new hybrid-A* search from `robot` to `goal`.
