@@ -33,7 +33,7 @@ pub use goals::{Advance, Goal, GoalProgress};
 pub use hybrid_astar::Planner;
 pub use intention::{
     stop_intention, Answer, AvoidParams, DlmMeasure, DlmParams, IntentionConfig, IntentionPlanner,
-    LpeImage, LpeParams, Planned, RefreshJob, Refreshed, ReuseParams,
+    LpeImage, LpeParams, Neighbour, Planned, RefreshJob, Refreshed, ReuseParams,
 };
 pub use map::{Disc, MapKey, PlanningMap};
 pub use path::{Path, PathStats};

@@ -10,7 +10,8 @@ use std::sync::Arc;
 use common::{along, estimate};
 use planning::sample::sample_pairs;
 use planning::{
-    Answer, DlmParams, Goal, GoalProgress, IntentionConfig, IntentionPlanner, PlanningMap,
+    Answer, DlmParams, Goal, GoalProgress, IntentionConfig, IntentionPlanner, Neighbour,
+    PlanningMap,
 };
 use protocol::{Dlm, Header, Pose2D, TaskId};
 
@@ -524,7 +525,7 @@ fn a_plan_keeps_clear_of_another_robot_in_the_corridor() {
     let mut among = corridor_planner();
     let Answer::Heading {
         plan: Ok(round), ..
-    } = among.answer_among(&start, &progress, false, &[other])
+    } = among.answer_among(&start, &progress, false, &[Neighbour::standing(other)])
     else {
         panic!("no plan round the other robot");
     };
@@ -545,7 +546,7 @@ fn a_plan_keeps_clear_of_another_robot_in_the_corridor() {
     // Kept while it holds; a robot that steps onto the kept path sends it to a new search.
     let next = estimate(along(&round.path, 0.05), 2);
     let Answer::Heading { plan: Ok(kept), .. } =
-        among.answer_among(&next, &progress, false, &[other])
+        among.answer_among(&next, &progress, false, &[Neighbour::standing(other)])
     else {
         panic!("no plan");
     };
@@ -553,7 +554,7 @@ fn a_plan_keeps_clear_of_another_robot_in_the_corridor() {
     let in_the_way = along(&round.path, 5.0);
     let Answer::Heading {
         plan: Ok(moved), ..
-    } = among.answer_among(&next, &progress, false, &[in_the_way])
+    } = among.answer_among(&next, &progress, false, &[Neighbour::standing(in_the_way)])
     else {
         panic!("no plan");
     };
@@ -570,15 +571,20 @@ fn a_robot_on_the_goal_or_filling_the_way_leaves_the_plan_on_the_floor_plan() {
     // On the goal: no path could end there, so the plan goes there all the same.
     let Answer::Heading {
         plan: Ok(to_goal), ..
-    } = planner.answer_among(&start, &progress, false, &[Pose2D::new(25.4, 5.2, 0.0)])
+    } = planner.answer_among(
+        &start,
+        &progress,
+        false,
+        &[Neighbour::standing(Pose2D::new(25.4, 5.2, 0.0))],
+    )
     else {
         panic!("no plan");
     };
     assert_eq!(to_goal.avoided_robots, 0);
     // A wall of robots across the corridor: the search round them fails within its budget
     // and the plan on the floor plan answers (the collision monitor holds the robot back).
-    let wall: Vec<Pose2D> = (0..8)
-        .map(|i| Pose2D::new(12.0, 3.0 + 0.5 * f64::from(i), 0.0))
+    let wall: Vec<Neighbour> = (0..8)
+        .map(|i| Neighbour::standing(Pose2D::new(12.0, 3.0 + 0.5 * f64::from(i), 0.0)))
         .collect();
     let mut blocked = corridor_planner();
     let Answer::Heading {
@@ -617,17 +623,20 @@ fn two_robots_meeting_head_on_pass_each_other() {
         ];
         let mut closest_m = f64::INFINITY;
         let mut done = [false, false];
+        let mut previous = robots;
         for step in 0..600_u64 {
             let before = robots;
             for i in 0..2 {
                 if done[i] {
                     continue;
                 }
-                let others = if among {
-                    vec![before[1 - i]]
-                } else {
-                    Vec::new()
+                // Each sees the other where it was, moving as it moved over the last step.
+                let other = Neighbour {
+                    pose: before[1 - i],
+                    vx_mps: (before[1 - i].x_m - previous[1 - i].x_m) / 0.1,
+                    vy_mps: (before[1 - i].y_m - previous[1 - i].y_m) / 0.1,
                 };
+                let others = if among { vec![other] } else { Vec::new() };
                 match planners[i].answer_among(
                     &estimate(before[i], step),
                     &GoalProgress::new(&goals[i], 0),
@@ -639,6 +648,7 @@ fn two_robots_meeting_head_on_pass_each_other() {
                     Answer::Done => done[i] = true,
                 }
             }
+            previous = before;
             closest_m = closest_m.min(robots[0].distance_m(&robots[1]));
             if done == [true, true] {
                 break;
@@ -657,4 +667,46 @@ fn two_robots_meeting_head_on_pass_each_other() {
     // them), kept to within the path's 5 cm steps.
     let berth_m = config.avoid.radius_m + config.planner.robot_radius_m;
     assert!(passing_m >= berth_m - 0.03, "closest {passing_m} m");
+}
+
+/// A robot ahead driving away is followed, not gone round; the same robot standing is.
+#[test]
+fn a_robot_ahead_driving_away_is_followed_and_one_standing_is_gone_round() {
+    let config = IntentionConfig::default();
+    let grid = map_core::load_ros_map(
+        &test_support::scenarios_dir().join("maps/junctions.yaml"),
+        &map_core::ImportLimits::default(),
+    )
+    .unwrap()
+    .grid;
+    let map = Arc::new(PlanningMap::new(grid, &config.planner).unwrap());
+    let goals = [Goal::at(20.0, 4.0)];
+    let start = estimate(Pose2D::new(5.0, 4.0, 0.0), 1);
+    let leader = Pose2D::new(7.5, 4.0, 0.0);
+    let plan_with = |other: Neighbour| {
+        let mut p = IntentionPlanner::new(Arc::clone(&map), config.clone()).unwrap();
+        let Answer::Heading { plan: Ok(plan), .. } =
+            p.answer_among(&start, &GoalProgress::new(&goals, 0), false, &[other])
+        else {
+            panic!("no plan");
+        };
+        plan
+    };
+    let off_centre_m = |plan: &planning::Planned| {
+        plan.path
+            .iter()
+            .filter(|q| q.x_m < 10.0)
+            .map(|q| (q.y_m - 4.0).abs())
+            .fold(0.0, f64::max)
+    };
+    let followed = plan_with(Neighbour {
+        pose: leader,
+        vx_mps: 0.5,
+        vy_mps: 0.0,
+    });
+    assert_eq!(followed.avoided_robots, 0);
+    assert!(off_centre_m(&followed) < 0.1, "{}", off_centre_m(&followed));
+    let passed = plan_with(Neighbour::standing(leader));
+    assert_eq!(passed.avoided_robots, 1);
+    assert!(off_centre_m(&passed) > 0.5, "{}", off_centre_m(&passed));
 }

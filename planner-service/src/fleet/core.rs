@@ -10,7 +10,8 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use planning::LpeImage;
-use protocol::{AgentStatus, Pose2D, PoseEstimate, RobotId, TaskId};
+use planning::Neighbour;
+use protocol::{AgentStatus, PoseEstimate, RobotId, TaskId};
 
 use super::book::{Decision, Effect, TaskBook};
 use super::config::FleetConfig;
@@ -31,7 +32,7 @@ pub struct Cycle {
     /// The other online robots on the robot's map within `[fleet] neighbour_radius_m`, which
     /// its plan keeps clear of.
     #[serde(default)]
-    pub neighbours: Vec<Pose2D>,
+    pub neighbours: Vec<Neighbour>,
 }
 
 /// Robots online and offline at a watchdog round (before it marked the silent ones).
@@ -227,7 +228,7 @@ impl Core {
     }
 
     /// The other online robots on `pose`'s map within `[fleet] neighbour_radius_m` of it.
-    fn neighbours(&self, id: &RobotId, pose: &PoseEstimate) -> Vec<Pose2D> {
+    fn neighbours(&self, id: &RobotId, pose: &PoseEstimate) -> Vec<Neighbour> {
         let radius_m = self.config.neighbour_radius_m;
         if radius_m <= 0.0 {
             return Vec::new();
@@ -235,10 +236,15 @@ impl Core {
         self.registry
             .iter()
             .filter(|r| r.online && &r.id != id)
-            .filter_map(|r| r.pose.as_ref())
-            .filter(|p| p.map.name == pose.map.name)
-            .map(|p| p.pose)
-            .filter(|p| p.distance_m(&pose.pose) <= radius_m)
+            .filter_map(|r| {
+                let p = r.pose.as_ref()?;
+                (p.map.name == pose.map.name && p.pose.distance_m(&pose.pose) <= radius_m)
+                    .then_some(Neighbour {
+                        pose: p.pose,
+                        vx_mps: r.velocity_mps.0,
+                        vy_mps: r.velocity_mps.1,
+                    })
+            })
             .collect()
     }
 

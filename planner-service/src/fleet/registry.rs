@@ -17,6 +17,28 @@ use super::config::FleetConfig;
 use super::types::{IntentionView, PoseView, RobotView, StatusView};
 use super::Now;
 
+/// Two poses further apart than this (by their stamps) give no velocity.
+pub const VELOCITY_MAX_GAP_NS: u64 = 1_000_000_000;
+
+/// The smoothed velocity after `pose`, from the one before (`last`) and the velocity so far:
+/// half the new step's, half the old; 0 after a gap, a jump to another map or a first pose.
+fn velocity_after(last: Option<&PoseEstimate>, pose: &PoseEstimate, old: (f64, f64)) -> (f64, f64) {
+    let Some(last) = last.filter(|l| l.map == pose.map) else {
+        return (0.0, 0.0);
+    };
+    let dt_ns = pose.header.stamp_ns.saturating_sub(last.header.stamp_ns);
+    if dt_ns == 0 || dt_ns > VELOCITY_MAX_GAP_NS {
+        return if dt_ns == 0 { old } else { (0.0, 0.0) };
+    }
+    #[allow(clippy::cast_precision_loss)]
+    let dt_s = dt_ns as f64 * 1e-9;
+    let step = (
+        (pose.pose.x_m - last.pose.x_m) / dt_s,
+        (pose.pose.y_m - last.pose.y_m) / dt_s,
+    );
+    (0.5 * (old.0 + step.0), 0.5 * (old.1 + step.1))
+}
+
 /// One robot as the service knows it.
 #[derive(Debug, Clone)]
 pub struct Robot {
@@ -26,6 +48,9 @@ pub struct Robot {
     pub last_seen: Instant,
     pub last_seen_ns: u64,
     pub pose: Option<PoseEstimate>,
+    /// Velocity in the map frame (m/s) from its last poses, smoothed; 0 until two poses on
+    /// one map came less than [`VELOCITY_MAX_GAP_NS`] apart.
+    pub velocity_mps: (f64, f64),
     pub status: Option<AgentStatus>,
     /// The last intention it was sent, without its image.
     pub intention: Option<IntentionView>,
@@ -45,6 +70,7 @@ impl Robot {
             last_seen: now,
             last_seen_ns: 0,
             pose: None,
+            velocity_mps: (0.0, 0.0),
             status: None,
             intention: None,
             lpe: None,
@@ -163,6 +189,7 @@ impl RobotRegistry {
         robot.online = true;
         robot.last_seen = now.at;
         robot.last_seen_ns = now.wall_ns;
+        robot.velocity_mps = velocity_after(robot.pose.as_ref(), &pose, robot.velocity_mps);
         robot.pose = Some(pose);
         let event_due = watched
             && robot

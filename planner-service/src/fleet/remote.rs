@@ -621,7 +621,11 @@ mod tests {
             },
             render_lpe: true,
             send_lpe: false,
-            neighbours: vec![Pose2D::new(3.0, 1.0, 0.5)],
+            neighbours: vec![planning::Neighbour {
+                pose: Pose2D::new(3.0, 1.0, 0.5),
+                vx_mps: 0.4,
+                vy_mps: -0.1,
+            }],
         };
         let back: Cycle = protocol::decode(&protocol::encode(&order).unwrap()).unwrap();
         assert_eq!(back, order);

@@ -551,7 +551,8 @@ fn a_cycle_names_the_other_robots_near_it_on_its_map() {
     core.watchdog(later);
     let (cycle, _) = core.begin_cycle(&r1, &pose(3.0, 4.0), later, false);
     assert!(matches!(cycle.decision, Decision::Plan { .. }));
-    assert_eq!(cycle.neighbours, vec![Pose2D::new(5.0, 4.5, 0.0)]);
+    assert_eq!(cycle.neighbours.len(), 1);
+    assert_eq!(cycle.neighbours[0].pose, Pose2D::new(5.0, 4.5, 0.0));
 
     // None to a robot with nothing to plan, and none when the radius is 0.
     let (idle, _) = core.begin_cycle(&robot("near"), &pose(5.0, 4.5), later, false);
@@ -570,4 +571,35 @@ fn a_cycle_names_the_other_robots_near_it_on_its_map() {
     let (cycle, _) = core.begin_cycle(&r1, &pose(3.0, 4.0), t0, false);
     assert!(matches!(cycle.decision, Decision::Plan { .. }));
     assert!(cycle.neighbours.is_empty());
+}
+
+#[test]
+fn a_robot_s_velocity_comes_from_its_last_poses() {
+    let dir = tempfile::tempdir().unwrap();
+    let t0 = Now::read();
+    let (mut core, _store, _) = open(dir.path(), t0);
+    let r = robot("robot_1");
+    let at = |x: f64, stamp_ms: u64| PoseEstimate {
+        header: Header::new(stamp_ms, stamp_ms * 1_000_000),
+        ..pose(x, 4.0)
+    };
+    let velocity = |core: &Core| core.registry.get(&r).unwrap().velocity_mps;
+    core.pose_arrived(&r, at(3.0, 1000), t0, false);
+    assert_eq!(velocity(&core), (0.0, 0.0));
+    // 5 cm in 0.1 s, twice: 0.25 then 0.375 m/s (half the step's, half the old).
+    core.pose_arrived(&r, at(3.05, 1100), t0, false);
+    assert!(
+        (velocity(&core).0 - 0.25).abs() < 1e-9,
+        "{:?}",
+        velocity(&core)
+    );
+    core.pose_arrived(&r, at(3.1, 1200), t0, false);
+    assert!(
+        (velocity(&core).0 - 0.375).abs() < 1e-9,
+        "{:?}",
+        velocity(&core)
+    );
+    // After a gap of more than a second the robot is taken as standing.
+    core.pose_arrived(&r, at(3.2, 3000), t0, false);
+    assert_eq!(velocity(&core), (0.0, 0.0));
 }

@@ -5,11 +5,14 @@
 //! back by its collision monitor, each stepping aside the same way, until they touched and stood
 //! (observed in the two-robot demo, docs/benchmarks.md "Robots that meet"). The fleet knows
 //! where every robot is, so the planner can route each robot round the others it is about to
-//! meet, as a local costmap's robot layer would: for two robots meeting head-on each sees the
-//! other off the same side of its own line, so both keep to the same side and pass.
+//! meet, as a local costmap's robot layer would. Each other robot is a disc; one ahead has its
+//! disc moved to the planning robot's left (`keep_right_m`), so two robots meeting head-on both
+//! keep right; one coming towards the planning robot gets discs along its way up to where the
+//! two would meet; one ahead driving away is followed, not gone round.
 //!
-//! Plain data: the caller passes the other robots' poses (the fleet sends those within its
-//! `neighbour_radius_m`); [`AvoidParams`] say how wide a berth and how long a search may try.
+//! Plain data: the caller passes the other robots' poses and velocities ([`Neighbour`]; the
+//! fleet sends those within its `neighbour_radius_m`); [`AvoidParams`] say how wide a berth and
+//! how long a search may try.
 //! When no path keeps clear (the other robot stands on the goal or fills the corridor), the
 //! robot gets the plan on the floor plan alone, as before, and its collision monitor holds it
 //! back; the avoiding search is not tried again for `retry_cycles`, so a blocked robot does not
@@ -20,6 +23,39 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::PlanError;
 use crate::map::Disc;
+
+/// Another robot of the fleet as a planner sees it (map frame): where it is and how it moves.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Neighbour {
+    pub pose: Pose2D,
+    /// Velocity from its last poses; 0 when not known (a first pose), as for a robot standing.
+    #[serde(default)]
+    pub vx_mps: f64,
+    #[serde(default)]
+    pub vy_mps: f64,
+}
+
+impl Neighbour {
+    /// A robot standing at `pose`.
+    #[must_use]
+    pub fn standing(pose: Pose2D) -> Self {
+        Self {
+            pose,
+            vx_mps: 0.0,
+            vy_mps: 0.0,
+        }
+    }
+
+    /// Its speed along the unit vector (`ux`, `uy`).
+    fn speed_along(&self, ux: f64, uy: f64) -> f64 {
+        self.vx_mps * ux + self.vy_mps * uy
+    }
+}
+
+/// A robot ahead that moves away from the planning robot at least this fast is clearing the
+/// way: following it is the collision monitor's business, and a disc would send the follower
+/// round it for as long as it keeps pace.
+pub const CLEARING_MPS: f64 = 0.2;
 
 /// Room left between the planning robot and a disc shrunk to let its search start.
 pub const START_GAP_M: f64 = 0.05;
@@ -89,7 +125,8 @@ impl AvoidParams {
     }
 
     /// The discs (map frame) a plan from `robot` to `goal` keeps out of (see
-    /// `oncoming_trail` and `keep_right_m`), and how many robots they stand for. A robot closer than the full berth gets a disc shrunk to leave the planning robot
+    /// `oncoming_trail` and `keep_right_m`), and how many robots they stand for. A robot that
+    /// moves away at [`CLEARING_MPS`] or more gets none. A robot closer than the full berth gets a disc shrunk to leave the planning robot
     /// [`START_GAP_M`] outside it, so the search can start (a robot standing right in front
     /// is still gone round), down to half of `radius_m`: closer than that, the robots are all
     /// but touching and the collision monitor decides. A robot within the berth of the goal is
@@ -97,7 +134,7 @@ impl AvoidParams {
     #[must_use]
     pub fn discs(
         &self,
-        others: &[Pose2D],
+        others: &[Neighbour],
         robot: Pose2D,
         goal: Pose2D,
         own_radius_m: f64,
@@ -110,10 +147,15 @@ impl AvoidParams {
         let (sin, cos) = robot.yaw_rad.sin_cos();
         for other in others
             .iter()
-            .filter(|o| o.distance_m(&goal) > self.radius_m + own_radius_m)
+            .filter(|o| o.pose.distance_m(&goal) > self.radius_m + own_radius_m)
         {
+            let (dx, dy) = (other.pose.x_m - robot.x_m, other.pose.y_m - robot.y_m);
+            let gap_m = dx.hypot(dy);
+            if gap_m > 1e-9 && other.speed_along(dx / gap_m, dy / gap_m) >= CLEARING_MPS {
+                continue;
+            }
             let before = discs.len();
-            discs.extend(oncoming_trail(*other, robot).into_iter().filter_map(|o| {
+            discs.extend(oncoming_trail(other, robot).into_iter().filter_map(|o| {
                 let ahead = (o.x_m - robot.x_m) * cos + (o.y_m - robot.y_m) * sin > 0.0;
                 let shift_m = if ahead { self.keep_right_m } else { 0.0 };
                 let (x_m, y_m) = (o.x_m - shift_m * sin, o.y_m + shift_m * cos);
@@ -130,24 +172,28 @@ impl AvoidParams {
 /// Spacing of the discs laid along an oncoming robot's way.
 pub const TRAIL_STEP_M: f64 = 0.5;
 
-/// Where another robot will be while the two close in: its pose, and when it faces the
-/// planning robot (its heading within 60 degrees of the direction to it) also points along its
-/// heading every [`TRAIL_STEP_M`] up to half the gap between them. Two robots driving at each
-/// other meet halfway; a disc only where the other robot is now would have each swerve by the
-/// time it reaches that spot, too late.
-fn oncoming_trail(other: Pose2D, robot: Pose2D) -> Vec<Pose2D> {
-    let (dx, dy) = (robot.x_m - other.x_m, robot.y_m - other.y_m);
+/// Slowest a robot may move to count as coming towards the planning robot.
+pub const ONCOMING_MPS: f64 = 0.1;
+
+/// Where another robot will be while the two close in: its pose, and when it moves towards the
+/// planning robot (at [`ONCOMING_MPS`] or more, within 60 degrees of the direction to it) also
+/// points along its way every [`TRAIL_STEP_M`] up to half the gap between them. Two robots
+/// driving at each other meet halfway; a disc only where the other robot is now would have
+/// each swerve by the time it reaches that spot, too late.
+fn oncoming_trail(other: &Neighbour, robot: Pose2D) -> Vec<Pose2D> {
+    let o = other.pose;
+    let (dx, dy) = (robot.x_m - o.x_m, robot.y_m - o.y_m);
     let gap_m = dx.hypot(dy);
-    let (sin, cos) = other.yaw_rad.sin_cos();
-    let mut trail = vec![other];
-    if gap_m > 1e-9 && (dx * cos + dy * sin) >= 0.5 * gap_m {
+    let speed_mps = other.vx_mps.hypot(other.vy_mps);
+    let mut trail = vec![o];
+    if gap_m > 1e-9
+        && speed_mps >= ONCOMING_MPS
+        && other.speed_along(dx / gap_m, dy / gap_m) >= 0.5 * speed_mps
+    {
+        let (ux, uy) = (other.vx_mps / speed_mps, other.vy_mps / speed_mps);
         let mut s = TRAIL_STEP_M;
         while s <= 0.5 * gap_m {
-            trail.push(Pose2D::new(
-                other.x_m + s * cos,
-                other.y_m + s * sin,
-                other.yaw_rad,
-            ));
+            trail.push(Pose2D::new(o.x_m + s * ux, o.y_m + s * uy, o.yaw_rad));
             s += TRAIL_STEP_M;
         }
     }
@@ -176,14 +222,15 @@ mod tests {
         let robot = Pose2D::new(0.0, 0.0, 0.0);
         let goal = Pose2D::new(10.0, 0.0, 0.0);
         let others = [
-            // Driving away: no trail.
-            Pose2D::new(5.0, 0.0, 0.1),
+            // Standing: one disc.
+            Pose2D::new(5.0, 0.0, 3.1),
             // 0.6 m ahead: within the full berth (0.65 m), so shrunk to leave 5 cm.
             Pose2D::new(0.6, 0.0, 0.0),
             // Touching, and on the goal: left out.
             Pose2D::new(0.4, 0.1, 0.0),
             Pose2D::new(9.6, 0.2, 0.0),
-        ];
+        ]
+        .map(Neighbour::standing);
         let (discs, robots) = params.discs(&others, robot, goal, 0.25);
         assert_eq!(robots, 2);
         assert_eq!(discs.len(), 2, "{discs:?}");
@@ -208,10 +255,17 @@ mod tests {
         let params = AvoidParams::default();
         let east = Pose2D::new(0.0, 0.0, 0.0);
         let west = Pose2D::new(4.0, 0.0, std::f64::consts::PI);
+        let driving = |pose: Pose2D| Neighbour {
+            pose,
+            vx_mps: 0.5 * pose.yaw_rad.cos(),
+            vy_mps: 0.5 * pose.yaw_rad.sin(),
+        };
         // Each sees the other's disc moved to its own left: north for the one facing east,
         // south for the one facing west; both go round on their right.
-        let (seen_by_east, _) = params.discs(&[west], east, Pose2D::new(10.0, 0.0, 0.0), 0.25);
-        let (seen_by_west, _) = params.discs(&[east], west, Pose2D::new(-4.0, 0.0, 0.0), 0.25);
+        let (seen_by_east, _) =
+            params.discs(&[driving(west)], east, Pose2D::new(10.0, 0.0, 0.0), 0.25);
+        let (seen_by_west, _) =
+            params.discs(&[driving(east)], west, Pose2D::new(-4.0, 0.0, 0.0), 0.25);
         assert!(
             (seen_by_east[0].y_m - 0.15).abs() < 1e-9,
             "{seen_by_east:?}"
@@ -229,13 +283,20 @@ mod tests {
         assert_eq!(seen_by_east.len(), 5, "{seen_by_east:?}");
         assert!((seen_by_east[4].x_m - 2.0).abs() < 1e-9, "{seen_by_east:?}");
         // A robot behind keeps its place.
+        let goal = Pose2D::new(10.0, 0.0, 0.0);
         let (behind, _) = params.discs(
-            &[Pose2D::new(-3.0, 0.0, 0.0)],
+            &[Neighbour::standing(Pose2D::new(-3.0, 0.0, 0.0))],
             east,
-            Pose2D::new(10.0, 0.0, 0.0),
+            goal,
             0.25,
         );
         assert!(behind[0].y_m.abs() < 1e-9);
+        // Standing and facing us: one disc, no trail.
+        let (parked, _) = params.discs(&[Neighbour::standing(west)], east, goal, 0.25);
+        assert_eq!(parked.len(), 1);
+        // Ahead and driving away: clearing the way, no disc.
+        let leader = driving(Pose2D::new(2.0, 0.0, 0.0));
+        assert_eq!(params.discs(&[leader], east, goal, 0.25), (Vec::new(), 0));
     }
 
     #[test]

@@ -12,7 +12,7 @@ pub mod lpe;
 pub mod pipeline;
 pub mod reuse;
 
-pub use avoid::AvoidParams;
+pub use avoid::{AvoidParams, Neighbour};
 pub use dlm::{dlm_from_path, next_dlm, DlmMeasure, DlmParams};
 pub use lpe::{render_lpe, LpeImage, LpeParams};
 pub use pipeline::{

@@ -16,7 +16,7 @@ use crate::config::PlannerConfig;
 use crate::error::{Endpoint, PlanError};
 use crate::goals::{Advance, GoalProgress};
 use crate::hybrid_astar::Planner;
-use crate::intention::avoid::{path_clear_of, AvoidParams};
+use crate::intention::avoid::{path_clear_of, AvoidParams, Neighbour};
 use crate::intention::dlm::{next_dlm, DlmParams};
 use crate::intention::lpe::{render_lpe, LpeImage, LpeParams};
 use crate::intention::reuse::{KeptPlan, ReuseParams};
@@ -356,14 +356,14 @@ impl IntentionPlanner {
         self.answer_among(pose, progress, render_lpe, &[])
     }
 
-    /// [`Self::answer`] for a robot of a fleet, with the poses of the other robots near it
-    /// (map frame, same map): the plan keeps clear of them where it can ([`AvoidParams`]).
+    /// [`Self::answer`] for a robot of a fleet, with the other robots near it (map frame, same
+    /// map): the plan keeps clear of them where it can ([`AvoidParams`]).
     pub fn answer_among(
         &mut self,
         pose: &PoseEstimate,
         progress: &GoalProgress<'_>,
         render_lpe: bool,
-        others: &[Pose2D],
+        others: &[Neighbour],
     ) -> Answer {
         let robot = pose.pose;
         self.trail.push_back(robot);
@@ -394,7 +394,7 @@ impl IntentionPlanner {
         goal: Pose2D,
         free_heading: bool,
         render_lpe: bool,
-        others: &[Pose2D],
+        others: &[Neighbour],
     ) -> Result<Planned, PlanError> {
         // The caller did not take the search the last answer left due: it answers now.
         if let Refresh::Due(_) = self.refresh {
