@@ -125,6 +125,7 @@ pub struct FleetMetrics {
     replans_total: AtomicU64,
     replan_failures_total: AtomicU64,
     replans_reused_total: AtomicU64,
+    replans_round_robots_total: AtomicU64,
     poses_superseded_total: AtomicU64,
     refresh_searches_total: AtomicU64,
     refresh_failures_total: AtomicU64,
@@ -147,6 +148,12 @@ impl FleetMetrics {
     /// One replan was answered from the robot's kept plan, without a search.
     pub fn record_reuse(&self) {
         self.replans_reused_total.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// One replan's path keeps clear of other robots (`[other_robots]`).
+    pub fn record_round_robots(&self) {
+        self.replans_round_robots_total
+            .fetch_add(1, Ordering::Relaxed);
     }
 
     #[must_use]
@@ -284,6 +291,9 @@ impl FleetMetrics {
              # TYPE fleet_replan_failures_total counter\nfleet_replan_failures_total {}\n\
              # HELP fleet_replans_reused_total Replans answered from the kept plan, no search.\n\
              # TYPE fleet_replans_reused_total counter\nfleet_replans_reused_total {}\n\
+             # HELP fleet_replans_round_robots_total Replans whose path keeps clear of other \
+             robots.\n\
+             # TYPE fleet_replans_round_robots_total counter\nfleet_replans_round_robots_total {}\n\
              # HELP fleet_poses_superseded_total Poses replaced by a newer one before a worker \
              took them (never answered).\n\
              # TYPE fleet_poses_superseded_total counter\nfleet_poses_superseded_total {}\n\
@@ -297,6 +307,7 @@ impl FleetMetrics {
             load(&self.replans_total),
             load(&self.replan_failures_total),
             load(&self.replans_reused_total),
+            load(&self.replans_round_robots_total),
             load(&self.poses_superseded_total),
             load(&self.refresh_searches_total),
             load(&self.refresh_failures_total),

@@ -591,6 +591,9 @@ impl Fleet {
         if matches!(outcome, Outcome::Planned { reused: true, .. }) {
             self.metrics.record_reuse();
         }
+        if matches!(outcome, Outcome::Planned { avoided_robots, .. } if avoided_robots > 0) {
+            self.metrics.record_round_robots();
+        }
         let sent = outcome.sent().cloned();
         let latency = sent
             .as_ref()

@@ -72,6 +72,9 @@ pub enum CycleResult {
     Stopped,
     Planned {
         reused: bool,
+        /// How many other robots the path keeps clear of.
+        #[serde(default)]
+        avoided_robots: usize,
     },
     Failed {
         task_id: TaskId,
@@ -142,7 +145,19 @@ impl CycleReport {
     fn of(header: Header, worker_id: WorkerId, outcome: Outcome) -> Self {
         let (result, sent, lpe) = match outcome {
             Outcome::Stopped { sent } => (CycleResult::Stopped, sent, None),
-            Outcome::Planned { sent, lpe, reused } => (CycleResult::Planned { reused }, sent, lpe),
+            Outcome::Planned {
+                sent,
+                lpe,
+                reused,
+                avoided_robots,
+            } => (
+                CycleResult::Planned {
+                    reused,
+                    avoided_robots,
+                },
+                sent,
+                lpe,
+            ),
             Outcome::Failed {
                 sent,
                 task,
@@ -182,10 +197,14 @@ impl CycleReport {
         });
         match self.result {
             CycleResult::Stopped => Outcome::Stopped { sent: self.sent },
-            CycleResult::Planned { reused } => Outcome::Planned {
+            CycleResult::Planned {
+                reused,
+                avoided_robots,
+            } => Outcome::Planned {
                 sent: self.sent,
                 lpe,
                 reused,
+                avoided_robots,
             },
             CycleResult::Failed {
                 task_id,
@@ -564,6 +583,7 @@ mod tests {
                 image: image.clone(),
             }),
             reused: true,
+            avoided_robots: 2,
         };
         let mut report = CycleReport::of(Header::new(1, 2), WorkerId::new("w1").unwrap(), outcome);
         report.superseded = 3;
@@ -571,10 +591,16 @@ mod tests {
         let back: CycleReport = protocol::decode(&bytes).unwrap();
         assert_eq!(back, report);
         match back.into_outcome() {
-            Outcome::Planned { sent, lpe, reused } => {
+            Outcome::Planned {
+                sent,
+                lpe,
+                reused,
+                avoided_robots,
+            } => {
                 assert_eq!(sent, Some(view()));
                 assert_eq!(lpe.unwrap().image, image);
                 assert!(reused);
+                assert_eq!(avoided_robots, 2);
             }
             other => panic!("{other:?}"),
         }

@@ -55,6 +55,8 @@ pub(crate) enum Outcome {
         sent: Option<IntentionView>,
         lpe: Option<LpeImage>,
         reused: bool,
+        /// How many other robots the path keeps clear of.
+        avoided_robots: usize,
     },
     /// No path to goal `goal` of `task`: the robot was stopped.
     Failed {
@@ -370,6 +372,7 @@ fn plan(host: &impl CycleHost, id: &RobotId, arrival: &Arrival, cycle: Cycle, st
                 sent: host.send_intention(id, &intention, arrival.received),
                 lpe: planned.lpe,
                 reused: planned.reused,
+                avoided_robots: planned.avoided_robots,
             }
         }
         Err(e) => {
