@@ -487,14 +487,18 @@ fn planned(p: &mut IntentionPlanner, pose: Pose2D, goals: &[Goal]) -> planning::
 /// robot starts at (2, 5.2) facing a goal at (25.5, 5.2) down the corridor.
 fn corridor_planner() -> IntentionPlanner {
     let config = IntentionConfig::default();
+    IntentionPlanner::new(scenario_map("corridor", &config), config).unwrap()
+}
+
+/// A floor plan of the scenarios (`sim/scenarios/maps/<name>.yaml`), ready for `config`.
+fn scenario_map(name: &str, config: &IntentionConfig) -> Arc<PlanningMap> {
     let grid = map_core::load_ros_map(
-        &test_support::scenarios_dir().join("maps/corridor.yaml"),
+        &test_support::scenarios_dir().join(format!("maps/{name}.yaml")),
         &map_core::ImportLimits::default(),
     )
     .unwrap()
     .grid;
-    let map = Arc::new(PlanningMap::new(grid, &config.planner).unwrap());
-    IntentionPlanner::new(map, config).unwrap()
+    Arc::new(PlanningMap::new(grid, &config.planner).unwrap())
 }
 
 /// Closest approach of `path` to `point`.
@@ -604,13 +608,7 @@ fn a_robot_on_the_goal_or_filling_the_way_leaves_the_plan_on_the_floor_plan() {
 #[test]
 fn two_robots_meeting_head_on_pass_each_other() {
     let config = IntentionConfig::default();
-    let grid = map_core::load_ros_map(
-        &test_support::scenarios_dir().join("maps/junctions.yaml"),
-        &map_core::ImportLimits::default(),
-    )
-    .unwrap()
-    .grid;
-    let map = Arc::new(PlanningMap::new(grid, &config.planner).unwrap());
+    let map = scenario_map("junctions", &config);
     let drive = |among: bool| -> (f64, [bool; 2]) {
         let mut robots = [
             Pose2D::new(4.0, 4.0, 0.0),
@@ -673,13 +671,7 @@ fn two_robots_meeting_head_on_pass_each_other() {
 #[test]
 fn a_robot_ahead_driving_away_is_followed_and_one_standing_is_gone_round() {
     let config = IntentionConfig::default();
-    let grid = map_core::load_ros_map(
-        &test_support::scenarios_dir().join("maps/junctions.yaml"),
-        &map_core::ImportLimits::default(),
-    )
-    .unwrap()
-    .grid;
-    let map = Arc::new(PlanningMap::new(grid, &config.planner).unwrap());
+    let map = scenario_map("junctions", &config);
     let goals = [Goal::at(20.0, 4.0)];
     let start = estimate(Pose2D::new(5.0, 4.0, 0.0), 1);
     let leader = Pose2D::new(7.5, 4.0, 0.0);
