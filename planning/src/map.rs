@@ -68,9 +68,10 @@ pub struct PlanningMap {
     misses: AtomicU64,
 }
 
-/// A disc the robot must keep out of, on top of the floor plan (another robot of the fleet),
-/// in the grid frame: the robot's centre stays at least `radius_m` plus the robot's own radius
-/// from its centre.
+/// A disc the robot must keep out of, on top of the floor plan (another robot of the fleet):
+/// the robot's centre stays at least `radius_m` plus the robot's own radius from its centre.
+/// In the map frame where the pipeline makes them ([`crate::AvoidParams::discs`],
+/// [`crate::Planner::plan_avoiding`]), in the grid frame inside the search.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Disc {
     pub x_m: f64,
