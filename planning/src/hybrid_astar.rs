@@ -125,7 +125,8 @@ pub struct Planner {
     nodes: Vec<Node>,
     open: BinaryHeap<MinKey>,
     lattice: LatticeMap,
-    /// Obstacles on top of the map for the plan under way ([`Self::plan_avoiding`]).
+    /// Obstacles on top of the map for the plan under way; set and cleared again by
+    /// [`Self::plan_avoiding`], empty otherwise.
     avoid: Vec<Disc>,
     /// The time budget of the plan under way, when not the configured one.
     budget_ms: Option<u64>,
@@ -230,8 +231,6 @@ impl Planner {
     /// (with its clearance), the goal unreachable (with the states explored), or the budget
     /// exceeded.
     pub fn plan(&mut self, start: Pose2D, goal: Pose2D) -> Result<Path, PlanError> {
-        self.avoid.clear();
-        self.budget_ms = None;
         self.plan_inner(start, goal)
     }
 

@@ -9,8 +9,7 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use planning::LpeImage;
-use planning::Neighbour;
+use planning::{LpeImage, Neighbour};
 use protocol::{AgentStatus, PoseEstimate, RobotId, TaskId};
 
 use super::book::{Decision, Effect, TaskBook};

@@ -26,10 +26,12 @@ fn velocity_after(last: Option<&PoseEstimate>, pose: &PoseEstimate, old: (f64, f
     let Some(last) = last.filter(|l| l.map == pose.map) else {
         return (0.0, 0.0);
     };
-    let dt_ns = pose.header.stamp_ns.saturating_sub(last.header.stamp_ns);
-    if dt_ns == 0 || dt_ns > VELOCITY_MAX_GAP_NS {
-        return if dt_ns == 0 { old } else { (0.0, 0.0) };
-    }
+    let dt_ns = match pose.header.stamp_ns.saturating_sub(last.header.stamp_ns) {
+        // The same stamp again (or an older one): nothing new to measure.
+        0 => return old,
+        gap if gap > VELOCITY_MAX_GAP_NS => return (0.0, 0.0),
+        dt => dt,
+    };
     #[allow(clippy::cast_precision_loss)]
     let dt_s = dt_ns as f64 * 1e-9;
     let step = (

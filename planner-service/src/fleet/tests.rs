@@ -525,28 +525,24 @@ fn a_cycle_names_the_other_robots_near_it_on_its_map() {
     let t0 = Now::read();
     let (mut core, _store, _) = open(dir.path(), t0);
     let r1 = robot("robot_1");
-    core.pose_arrived(&r1, pose(3.0, 4.0), t0, false);
-    // Near on the same map, far on the same map, near on another map, and near but silent.
-    for (id, p) in [
+    // The robot, then others: near on the same map, far on the same map, near on another
+    // map, and near but silent (last, so the loop below leaves it out).
+    let robots = [
+        ("robot_1", pose(3.0, 4.0)),
         ("near", pose(5.0, 4.5)),
         ("far", pose(13.0, 10.0)),
         ("elsewhere", pose_on("depot", 3.5, 4.0)),
         ("silent", pose(3.0, 5.0)),
-    ] {
-        core.pose_arrived(&robot(id), p, t0, false);
+    ];
+    for (id, p) in &robots {
+        core.pose_arrived(&robot(id), p.clone(), t0, false);
     }
     core.create(new_task(Some("robot_1"), &[(13.0, 10.0)]), 1, t0)
         .unwrap();
     // "silent" sends nothing more and is marked offline by the watchdog.
     let later = ms(t0, 700);
-    for id in ["robot_1", "near", "far", "elsewhere"] {
-        let p = match id {
-            "robot_1" => pose(3.0, 4.0),
-            "near" => pose(5.0, 4.5),
-            "far" => pose(13.0, 10.0),
-            _ => pose_on("depot", 3.5, 4.0),
-        };
-        core.pose_arrived(&robot(id), p, later, false);
+    for (id, p) in &robots[..4] {
+        core.pose_arrived(&robot(id), p.clone(), later, false);
     }
     core.watchdog(later);
     let (cycle, _) = core.begin_cycle(&r1, &pose(3.0, 4.0), later, false);
