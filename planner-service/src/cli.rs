@@ -21,8 +21,8 @@ use crate::bench::{markdown_table, run_bench, BenchOptions};
 use crate::config::ServiceConfig;
 use crate::http::auth::TokenSource;
 use crate::http::{ServeOptions, Server};
-use planning::intention::{dlm_from_path, render_lpe};
-use planning::picture::{render_picture, save_picture};
+use planning::intention::{dlm_on_map, floor_plan_route, render_lpe, DlmMeasure};
+use planning::picture::{render_picture_with_route, save_picture};
 use planning::{Planner, PlanningMap};
 
 /// Fleet planner: hybrid A* paths and intentions on floor plans.
@@ -650,14 +650,23 @@ fn plan(args: &PlanArgs, out: &mut dyn Write) -> anyhow::Result<()> {
     let path = planner
         .plan(args.start, args.goal)
         .context("planning failed")?;
-    let dlm = dlm_from_path(&path.poses, args.start, &cfg.dlm);
+    let dlm = dlm_on_map(&map, &path.poses, args.start, args.goal, &cfg.dlm, None);
 
     if let Some(lpe_path) = &args.lpe {
         let img = render_lpe(map.grid(), args.start, &[], &path.poses, &cfg.lpe)?;
         img.save_png(lpe_path)?;
     }
     if let Some(pic) = &args.picture {
-        save_picture(&render_picture(map.grid(), &path.poses), pic)?;
+        // The route measure's route, as far as the path goes, beside the path it measures
+        // instead.
+        let route = (cfg.dlm.measure == DlmMeasure::Route)
+            .then(|| floor_plan_route(&map, args.start, args.goal, path.length_m))
+            .flatten()
+            .unwrap_or_default();
+        save_picture(
+            &render_picture_with_route(map.grid(), &path.poses, &route),
+            pic,
+        )?;
     }
     if args.json {
         let doc = serde_json::json!({

@@ -18,6 +18,7 @@ const FREE: Rgb<u8> = Rgb([255, 255, 255]);
 const OCCUPIED: Rgb<u8> = Rgb([0, 0, 0]);
 const UNKNOWN: Rgb<u8> = Rgb([160, 160, 160]);
 const PATH: Rgb<u8> = Rgb([0, 0, 255]);
+const ROUTE: Rgb<u8> = Rgb([255, 140, 0]);
 const START: Rgb<u8> = Rgb([0, 170, 0]);
 const GOAL: Rgb<u8> = Rgb([220, 0, 0]);
 
@@ -32,6 +33,17 @@ pub struct PictureError {
 /// Renders `grid` with `path` (map frame) on it; start green, goal red, path blue.
 #[must_use]
 pub fn render_picture(grid: &OccupancyGrid, path: &[Pose2D]) -> RgbImage {
+    render_picture_with_route(grid, path, &[])
+}
+
+/// [`render_picture`] with `route` (map frame, a polyline: the floor plan's route the `route`
+/// DLM measures) drawn in orange under the path.
+#[must_use]
+pub fn render_picture_with_route(
+    grid: &OccupancyGrid,
+    path: &[Pose2D],
+    route: &[Pose2D],
+) -> RgbImage {
     let (w, h) = (
         i64::from(grid.width_cells()),
         i64::from(grid.height_cells()),
@@ -73,6 +85,26 @@ pub fn render_picture(grid: &OccupancyGrid, path: &[Pose2D]) -> RgbImage {
             };
             if let Some((u, v)) = to_px(cx, cy) {
                 img.put_pixel(u, v, colour);
+            }
+        }
+    }
+    let step_m = 0.5 * grid.resolution_m();
+    for w in route.windows(2) {
+        let length_m = w[0].distance_m(&w[1]);
+        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+        let n = (length_m / step_m).ceil().max(1.0) as u32;
+        for k in 0..=n {
+            let t = f64::from(k) / f64::from(n);
+            let (gx, gy) = grid.world_to_grid(
+                w[0].x_m + t * (w[1].x_m - w[0].x_m),
+                w[0].y_m + t * (w[1].y_m - w[0].y_m),
+            );
+            #[allow(clippy::cast_possible_truncation)]
+            let (cx, cy) = (gx.floor() as i64, gy.floor() as i64);
+            for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                if let Some((u, v)) = to_px(cx + dx, cy + dy) {
+                    img.put_pixel(u, v, ROUTE);
+                }
             }
         }
     }
@@ -124,6 +156,26 @@ mod tests {
         assert_eq!(*img.get_pixel(0, 0), OCCUPIED);
         assert_eq!(*img.get_pixel(5, 29 - 5), START);
         assert_eq!(*img.get_pixel(30, 29 - 20), GOAL);
+    }
+
+    #[test]
+    fn the_route_is_drawn_under_the_path() {
+        let g = OccupancyGrid::filled(40, 30, 0.1, Pose2D::new(0.0, 0.0, 0.0), FREE_CELL).unwrap();
+        let path = vec![Pose2D::new(0.55, 0.55, 0.0), Pose2D::new(3.05, 0.55, 0.0)];
+        // Up from the start, then east: an L apart from the path but at the start.
+        let route = vec![
+            Pose2D::new(0.55, 0.55, 0.0),
+            Pose2D::new(0.55, 2.05, 0.0),
+            Pose2D::new(3.05, 2.05, 0.0),
+        ];
+        let img = render_picture_with_route(&g, &path, &route);
+        assert_eq!(*img.get_pixel(5, 29 - 15), ROUTE);
+        assert_eq!(*img.get_pixel(20, 29 - 20), ROUTE);
+        assert_eq!(*img.get_pixel(20, 29 - 10), FREE);
+        assert_eq!(
+            render_picture(&g, &path),
+            render_picture_with_route(&g, &path, &[])
+        );
     }
 
     #[test]

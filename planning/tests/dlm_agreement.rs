@@ -120,7 +120,11 @@ fn dlm_agreement_on_seven_maps() {
         .unwrap_or(30);
     let scenario_maps = test_support::scenarios_dir().join("maps");
     let config = IntentionConfig::default();
-    for measure in [DlmMeasure::Curvature, DlmMeasure::Heading] {
+    for measure in [
+        DlmMeasure::Curvature,
+        DlmMeasure::Heading,
+        DlmMeasure::Route,
+    ] {
         println!(
             "\n{} measure, {routes} routes per map\n\n| map | cycles | kept plan = new search | new search = new search, other jitter | DLM changes | after at most 0.3 s |\n|---|---|---|---|---|---|",
             measure.as_str()

@@ -10,8 +10,8 @@ use std::sync::Arc;
 use common::{along, estimate};
 use planning::sample::sample_pairs;
 use planning::{
-    Answer, DlmParams, Goal, GoalProgress, IntentionConfig, IntentionPlanner, Neighbour,
-    PlanningMap,
+    Answer, DlmMeasure, DlmParams, Goal, GoalProgress, IntentionConfig, IntentionPlanner,
+    Neighbour, PlanningMap,
 };
 use protocol::{Dlm, Header, Pose2D, TaskId};
 
@@ -311,6 +311,27 @@ fn with_the_heading_dlm_a_kept_plan_gives_the_dlm_of_a_new_search_in_99_percent_
         heading.repeatable() >= 0.98,
         "a new search with itself: {:.3}",
         heading.repeatable()
+    );
+}
+
+/// With the route DLM (planning `DlmMeasure::Route`) the DLM comes from the floor plan's route
+/// from the robot, so a kept plan gives exactly the DLM of a new search from the same pose.
+#[test]
+fn with_the_route_dlm_a_kept_plan_gives_the_dlm_of_a_new_search_in_every_cycle() {
+    let route = kept_against_new(DlmParams {
+        measure: DlmMeasure::Route,
+        ..DlmParams::heading()
+    });
+    println!(
+        "route DLM, {} cycles: same as a new search {}, a new search with other jitter {}",
+        route.cycles, route.same_dlm, route.same_reference
+    );
+    assert!(route.cycles > 300, "{} cycles", route.cycles);
+    assert_eq!(route.same_dlm, route.cycles);
+    assert!(
+        route.repeatable() >= 0.98,
+        "a new search with itself: {:.3}",
+        route.repeatable()
     );
 }
 

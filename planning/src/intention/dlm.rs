@@ -20,9 +20,15 @@
 //!   `turn_release_rad` on the same side (hysteresis, so the caller passes the previous DLM):
 //!   the route's direction a metre or two ahead, not where one point of it lies, so wiggles and
 //!   corner cuts of a few centimetres do not change it.
+//! - [`DlmMeasure::Route`]: the heading measure's rule on the floor plan's route from the robot
+//!   to the goal ([`super::route`]) instead of on the searched path, so the DLM does not depend
+//!   on how a search bent (a kept plan and a new search from one pose get the same DLM); `Stop`
+//!   still comes from the path.
 
 use protocol::{Dlm, Pose2D};
 
+use crate::intention::route::floor_plan_route;
+use crate::map::PlanningMap;
 use crate::path::{length_of, point_along};
 use serde::{Deserialize, Serialize};
 
@@ -36,6 +42,8 @@ pub enum DlmMeasure {
     /// (the default since DLM-Net h1, docs/evaluation.md).
     #[default]
     Heading,
+    /// The heading measure on the floor plan's route to the goal, not on the searched path.
+    Route,
 }
 
 impl DlmMeasure {
@@ -45,6 +53,7 @@ impl DlmMeasure {
         match self {
             Self::Curvature => "curvature",
             Self::Heading => "heading",
+            Self::Route => "route",
         }
     }
 }
@@ -56,8 +65,9 @@ impl std::str::FromStr for DlmMeasure {
         match s {
             "curvature" => Ok(Self::Curvature),
             "heading" => Ok(Self::Heading),
+            "route" => Ok(Self::Route),
             other => Err(format!(
-                "unknown DLM measure {other:?} (expected curvature or heading)"
+                "unknown DLM measure {other:?} (expected curvature, heading or route)"
             )),
         }
     }
@@ -75,13 +85,15 @@ pub struct DlmParams {
     /// `curvature`: |curvature| at or above which the move is a turn (1/m; 0.3 = a 3.3 m
     /// radius).
     pub curvature_threshold_per_m: f64,
-    /// `heading`: arc length ahead of the robot where the measured chord of the path starts.
+    /// `heading`, `route`: arc length ahead of the robot where the measured chord of the path
+    /// (the route) starts.
     pub heading_start_m: f64,
-    /// `heading`: length of that chord.
+    /// `heading`, `route`: length of that chord.
     pub heading_chord_m: f64,
-    /// `heading`: |angle| between the chord and the robot's heading at which a turn starts.
+    /// `heading`, `route`: |angle| between the chord and the robot's heading at which a turn
+    /// starts.
     pub turn_threshold_rad: f64,
-    /// `heading`: a turn holds while the angle stays at or past this on its side.
+    /// `heading`, `route`: a turn holds while the angle stays at or past this on its side.
     pub turn_release_rad: f64,
     /// `Stop` when the path left to drive is at most this long.
     pub stop_distance_m: f64,
@@ -232,9 +244,49 @@ pub fn dlm_from_path(path: &[Pose2D], robot: Pose2D, params: &DlmParams) -> Dlm 
 }
 
 /// The DLM for a robot at `robot` following `path`, after `previous` (the DLM answered to the
-/// robot's last pose, which the heading measure's hysteresis holds a turn on).
+/// robot's last pose, which the heading measure's hysteresis holds a turn on). The route
+/// measure without a route measures the path, as the heading measure does.
 #[must_use]
 pub fn next_dlm(path: &[Pose2D], robot: Pose2D, params: &DlmParams, previous: Option<Dlm>) -> Dlm {
+    next_dlm_along(path, None, robot, params, previous)
+}
+
+/// The DLM for a robot at `robot` sent along `path` towards `goal` on `map`, after
+/// `previous`: the route measure turns on the floor plan's route from the robot
+/// ([`floor_plan_route`], as far as the chord reaches), the others on the path. What the
+/// pipeline answers and `planner-service plan` prints.
+#[must_use]
+pub fn dlm_on_map(
+    map: &PlanningMap,
+    path: &[Pose2D],
+    robot: Pose2D,
+    goal: Pose2D,
+    params: &DlmParams,
+    previous: Option<Dlm>,
+) -> Dlm {
+    let route = (params.measure == DlmMeasure::Route)
+        .then(|| {
+            floor_plan_route(
+                map,
+                robot,
+                goal,
+                params.heading_start_m + params.heading_chord_m,
+            )
+        })
+        .flatten();
+    next_dlm_along(path, route.as_deref(), robot, params, previous)
+}
+
+/// [`next_dlm`] with the floor plan's route from the robot (`route`, from
+/// [`super::route::floor_plan_route`]), which the route measure turns on instead of the path.
+#[must_use]
+pub fn next_dlm_along(
+    path: &[Pose2D],
+    route: Option<&[Pose2D]>,
+    robot: Pose2D,
+    params: &DlmParams,
+    previous: Option<Dlm>,
+) -> Dlm {
     let Some(closest) = crate::path::nearest_index(path, robot) else {
         return Dlm::Stop;
     };
@@ -254,8 +306,12 @@ pub fn next_dlm(path: &[Pose2D], robot: Pose2D, params: &DlmParams, previous: Op
                 Dlm::TurnRight
             }
         }
-        DlmMeasure::Heading => {
-            let angle = heading_ahead_rad(rest, robot, params);
+        DlmMeasure::Heading | DlmMeasure::Route => {
+            let measured = match (params.measure, route) {
+                (DlmMeasure::Route, Some(route)) => route,
+                _ => rest,
+            };
+            let angle = heading_ahead_rad(measured, robot, params);
             match previous {
                 Some(Dlm::TurnLeft) if angle >= params.turn_release_rad => Dlm::TurnLeft,
                 Some(Dlm::TurnRight) if angle <= -params.turn_release_rad => Dlm::TurnRight,
@@ -482,6 +538,39 @@ mod tests {
         let beside = Pose2D::new(near.x_m, near.y_m, 0.0);
         assert_eq!(dlm_from_path(&path, beside, &h), Dlm::TurnLeft);
         assert_eq!(dlm_from_path(&path, path[path.len() - 4], &h), Dlm::Stop);
+    }
+
+    #[test]
+    fn route_measure_turns_on_the_route_and_stops_on_the_path() {
+        let r = DlmParams {
+            measure: DlmMeasure::Route,
+            ..DlmParams::heading()
+        };
+        // The searched path runs straight east; the floor plan's route bends north 1 m ahead.
+        let path = arc(Pose2D::new(0.0, 0.0, 0.0), 0.0, 5.0, 0.05);
+        let mut route = arc(Pose2D::new(0.0, 0.0, 0.0), 0.0, 1.0, 0.05);
+        route.extend_from_slice(&arc(Pose2D::new(1.0, 0.0, FRAC_PI_2), 0.0, 4.0, 0.05)[1..]);
+        let robot = path[0];
+        assert_eq!(
+            next_dlm_along(&path, Some(&route), robot, &r, None),
+            Dlm::TurnLeft
+        );
+        // Without a route it measures the path, as the heading measure does.
+        assert_eq!(next_dlm_along(&path, None, robot, &r, None), Dlm::GoForward);
+        // The heading measure ignores a route.
+        let h = DlmParams::heading();
+        assert_eq!(
+            next_dlm_along(&path, Some(&route), robot, &h, None),
+            Dlm::GoForward
+        );
+        // Stop comes from the path: near its end, whatever the route says.
+        let near_end = path[path.len() - 3];
+        assert_eq!(
+            next_dlm_along(&path, Some(&route), near_end, &r, None),
+            Dlm::Stop
+        );
+        assert_eq!("route".parse::<DlmMeasure>().unwrap(), DlmMeasure::Route);
+        assert_eq!(DlmMeasure::Route.as_str(), "route");
     }
 
     #[test]

@@ -5,18 +5,21 @@
 //! - [`pipeline`]: pose in, intention out: the one pipeline the service and the evaluation run.
 //! - [`reuse`]: when the previous plan answers instead of a new search.
 //! - [`avoid`]: plans that keep clear of the fleet's other robots.
+//! - [`route`]: the floor plan's route to the goal, which the `route` DLM measures.
 
 pub mod avoid;
 pub mod dlm;
 pub mod lpe;
 pub mod pipeline;
 pub mod reuse;
+pub mod route;
 
 pub use avoid::{AvoidParams, Neighbour};
-pub use dlm::{dlm_from_path, next_dlm, DlmMeasure, DlmParams};
+pub use dlm::{dlm_from_path, dlm_on_map, next_dlm, next_dlm_along, DlmMeasure, DlmParams};
 pub use lpe::{render_lpe, LpeImage, LpeParams};
 pub use pipeline::{
     stop_intention, thin_path, Answer, IntentionConfig, IntentionPlanner, Planned, RefreshJob,
     Refreshed,
 };
 pub use reuse::{KeptPlan, KeptRest, ReuseParams};
+pub use route::floor_plan_route;

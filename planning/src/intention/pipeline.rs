@@ -17,7 +17,7 @@ use crate::error::{Endpoint, PlanError};
 use crate::goals::{Advance, GoalProgress};
 use crate::hybrid_astar::Planner;
 use crate::intention::avoid::{path_clear_of, AvoidParams, Neighbour};
-use crate::intention::dlm::{next_dlm, DlmParams};
+use crate::intention::dlm::{dlm_on_map, DlmParams};
 use crate::intention::lpe::{render_lpe, LpeImage, LpeParams};
 use crate::intention::reuse::{KeptPlan, ReuseParams};
 use crate::map::PlanningMap;
@@ -443,7 +443,14 @@ impl IntentionPlanner {
         {
             self.refresh = Refresh::Due(robot);
         }
-        let dlm = next_dlm(&poses, robot, &self.config.dlm, self.last_dlm);
+        let dlm = dlm_on_map(
+            self.fixed.map(),
+            &poses,
+            robot,
+            goal,
+            &self.config.dlm,
+            self.last_dlm,
+        );
         self.last_dlm = Some(dlm);
         let lpe = if render_lpe {
             let trail: Vec<Pose2D> = self.trail.iter().copied().collect();
