@@ -219,12 +219,16 @@ pub struct TableArgs {
     /// does not fit are left out. With `--generated N`: the situation on N buildings.
     #[arg(long)]
     encounter: Option<Encounter>,
-    /// How the planner derives the DLM (`heading` or `curvature`, planning `DlmMeasure`);
+    /// How the planner derives the DLM (`heading`, `route` or `curvature`, planning `DlmMeasure`);
     /// default: what the DLM-Net's card says it was trained on (`dlm_measure`; a card
-    /// without one: curvature, DLM-Net r1's), and heading for a table without DLM-Net. A
-    /// value that contradicts the card is refused.
+    /// without one: curvature, DLM-Net r1's), and the planner's default for a table without
+    /// DLM-Net. A value that contradicts the card is refused, unless `--dlm-measure-over-card`.
     #[arg(long)]
     dlm_measure: Option<DlmMeasure>,
+    /// Lets `--dlm-measure` contradict the DLM-Net's card: the network is fed intentions of a
+    /// measure it was not trained on (to see how it copes, before training on the new one).
+    #[arg(long, requires = "dlm_measure")]
+    dlm_measure_over_card: bool,
 }
 
 impl TableArgs {
@@ -313,12 +317,17 @@ pub struct RecordArgs {
     /// Also record the camera (JPEG) in the run logs.
     #[arg(long, requires = "record_dir")]
     record_camera: bool,
-    /// How the planner derives the DLM labels (`heading` or `curvature`, what DLM-Net r1 was
-    /// trained on; planning `DlmMeasure`); default: the measure a DLM-Net `--policy` was
-    /// trained on (its card), else heading. index.json records the `[dlm]` parameters as
-    /// `dlm_params`.
+    /// How the planner derives the DLM labels (`heading`, `route`, or `curvature`, what DLM-Net
+    /// r1 was trained on; planning `DlmMeasure`); default: the measure a DLM-Net `--policy` was
+    /// trained on (its card), else the planner's default. index.json records the `[dlm]`
+    /// parameters as `dlm_params`. A measure that contradicts the policy's card is refused,
+    /// unless `--dlm-measure-over-card`.
     #[arg(long)]
     dlm_measure: Option<DlmMeasure>,
+    /// Lets `--dlm-measure` contradict the `--policy` DLM-Net's card: the first DAgger round
+    /// of a new measure, driven by a network trained on another one, labelled in the new one.
+    #[arg(long, requires = "dlm_measure")]
+    dlm_measure_over_card: bool,
     /// Output folder: index.json and shard_NNNNN/*.npy (training/DATASET.md).
     #[arg(long)]
     out: PathBuf,
@@ -326,11 +335,12 @@ pub struct RecordArgs {
 
 /// The DLM measure to plan with: the one asked for, else the one the DLM-Net `dlm_model`
 /// (when one drives) was trained on, read from its ONNX card (`dlm_measure`; absent: curvature,
-/// DLM-Net r1's), else the default (heading). A measure asked for that contradicts the card is
-/// refused: the network would be fed intentions it never saw.
+/// DLM-Net r1's), else the planner's default. A measure asked for that contradicts the card is
+/// refused unless `over_card`: the network would be fed intentions it never saw.
 fn dlm_measure_for(
     asked: Option<DlmMeasure>,
     dlm_model: Option<&std::path::Path>,
+    over_card: bool,
 ) -> anyhow::Result<DlmMeasure> {
     let Some(model) = dlm_model else {
         return Ok(asked.unwrap_or_default());
@@ -344,8 +354,18 @@ fn dlm_measure_for(
         None => DlmMeasure::Curvature,
     };
     match asked {
+        Some(a) if a != trained_on && over_card => {
+            tracing::warn!(
+                model = %model.display(),
+                trained_on = trained_on.as_str(),
+                planned_with = a.as_str(),
+                "the DLM-Net is fed a DLM measure it was not trained on (--dlm-measure-over-card)"
+            );
+            Ok(a)
+        }
         Some(a) if a != trained_on => anyhow::bail!(
-            "--dlm-measure {} but the card of {} says it was trained on the {} DLM",
+            "--dlm-measure {} but the card of {} says it was trained on the {} DLM \
+             (--dlm-measure-over-card to drive it on another measure anyway)",
             a.as_str(),
             model.display(),
             trained_on.as_str()
@@ -399,7 +419,11 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
                 record: record_settings(args.record_dir.as_deref(), args.record_camera),
                 ..crate::record::recording_run_options()
             };
-            run.intention.dlm.measure = dlm_measure_for(args.dlm_measure, dlm_policy.as_deref())?;
+            run.intention.dlm.measure = dlm_measure_for(
+                args.dlm_measure,
+                dlm_policy.as_deref(),
+                args.dlm_measure_over_card,
+            )?;
             run
         },
         command: std::env::args().collect::<Vec<_>>().join(" "),
@@ -536,6 +560,7 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
                 methods
                     .contains(&ControllerKind::Dlm)
                     .then_some(dlm_model.as_path()),
+                args.dlm_measure_over_card,
             )?;
             intention
         },
@@ -795,31 +820,39 @@ mod tests {
         // The shipped DLM-Net was trained on the heading DLM; a card without the key
         // (the fixture, DLM-Net r1) means curvature.
         assert_eq!(
-            dlm_measure_for(None, Some(&shipped)).unwrap(),
+            dlm_measure_for(None, Some(&shipped), false).unwrap(),
             DlmMeasure::Heading
         );
         assert_eq!(
-            dlm_measure_for(None, Some(&fixture)).unwrap(),
+            dlm_measure_for(None, Some(&fixture), false).unwrap(),
             DlmMeasure::Curvature
         );
         assert_eq!(
-            dlm_measure_for(Some(DlmMeasure::Heading), Some(&shipped)).unwrap(),
+            dlm_measure_for(Some(DlmMeasure::Heading), Some(&shipped), false).unwrap(),
             DlmMeasure::Heading
         );
-        let err = dlm_measure_for(Some(DlmMeasure::Curvature), Some(&shipped)).unwrap_err();
+        let err = dlm_measure_for(Some(DlmMeasure::Curvature), Some(&shipped), false).unwrap_err();
         assert!(
             err.to_string().contains("--dlm-measure curvature")
                 && err.to_string().contains("heading"),
             "{err}"
         );
-        // Without a DLM-Net, what is asked for, else the default.
+        // Unless told to drive it on another measure anyway.
         assert_eq!(
-            dlm_measure_for(Some(DlmMeasure::Curvature), None).unwrap(),
+            dlm_measure_for(Some(DlmMeasure::Curvature), Some(&shipped), true).unwrap(),
             DlmMeasure::Curvature
         );
-        assert_eq!(dlm_measure_for(None, None).unwrap(), DlmMeasure::Heading);
+        // Without a DLM-Net, what is asked for, else the default.
+        assert_eq!(
+            dlm_measure_for(Some(DlmMeasure::Curvature), None, false).unwrap(),
+            DlmMeasure::Curvature
+        );
+        assert_eq!(
+            dlm_measure_for(None, None, false).unwrap(),
+            DlmMeasure::default()
+        );
         let missing = test_support::models_dir().join("no-such-model.onnx");
-        assert!(dlm_measure_for(None, Some(&missing)).is_err());
+        assert!(dlm_measure_for(None, Some(&missing), false).is_err());
     }
 
     #[test]
