@@ -817,24 +817,24 @@ mod tests {
     fn the_dlm_is_planned_with_the_measure_its_dlm_net_was_trained_on() {
         let shipped = test_support::models_dir().join("dlm.onnx");
         let fixture = test_support::models_dir().join("fixtures").join("dlm.onnx");
-        // The shipped DLM-Net was trained on the heading DLM; a card without the key
+        // The shipped DLM-Net was trained on the route DLM; a card without the key
         // (the fixture, DLM-Net r1) means curvature.
         assert_eq!(
             dlm_measure_for(None, Some(&shipped), false).unwrap(),
-            DlmMeasure::Heading
+            DlmMeasure::Route
         );
         assert_eq!(
             dlm_measure_for(None, Some(&fixture), false).unwrap(),
             DlmMeasure::Curvature
         );
         assert_eq!(
-            dlm_measure_for(Some(DlmMeasure::Heading), Some(&shipped), false).unwrap(),
-            DlmMeasure::Heading
+            dlm_measure_for(Some(DlmMeasure::Route), Some(&shipped), false).unwrap(),
+            DlmMeasure::Route
         );
         let err = dlm_measure_for(Some(DlmMeasure::Curvature), Some(&shipped), false).unwrap_err();
         assert!(
             err.to_string().contains("--dlm-measure curvature")
-                && err.to_string().contains("heading"),
+                && err.to_string().contains("the route DLM"),
             "{err}"
         );
         // Unless told to drive it on another measure anyway.

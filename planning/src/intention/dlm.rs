@@ -1,8 +1,8 @@
 //! DLM (discretized local move): `TurnLeft | TurnRight | GoForward | Stop` from a path.
 //!
 //! Paper §3.1: the sign and size of the path's local signed curvature at the robot, against a
-//! threshold; `Stop` when the remaining path is shorter than `stop_distance_m`. Two measures of
-//! "how much the path turns ahead", both in the robot's frame, so "left" means left of where
+//! threshold; `Stop` when the remaining path is shorter than `stop_distance_m`. Three measures
+//! of "how much the path turns ahead", all in the robot's frame, so "left" means left of where
 //! the robot faces, even when the path starts with a turn in place:
 //!
 //! - [`DlmMeasure::Curvature`] (what DLM-Net r1 was trained on): the circle through the robot,
@@ -13,17 +13,17 @@
 //!   hybrid-A* search that bends its first metre differently, or cuts a corner 10 cm
 //!   tighter, flips it: half of its changes last 0.3 s or less (docs/benchmarks.md, "A DLM that
 //!   holds").
-//! - [`DlmMeasure::Heading`] (the default, what the shipped DLM-Net was trained on): the
-//!   direction of the path's chord from `heading_start_m` to
+//! - [`DlmMeasure::Heading`] (what DLM-Net h1–d1 were trained on): the direction of the
+//!   path's chord from `heading_start_m` to
 //!   `heading_start_m + heading_chord_m` ahead, against the robot's heading. A turn starts when
 //!   that angle reaches `turn_threshold_rad` and holds while it stays at or past
 //!   `turn_release_rad` on the same side (hysteresis, so the caller passes the previous DLM):
 //!   the route's direction a metre or two ahead, not where one point of it lies, so wiggles and
 //!   corner cuts of a few centimetres do not change it.
-//! - [`DlmMeasure::Route`]: the heading measure's rule on the floor plan's route from the robot
-//!   to the goal ([`super::route`]) instead of on the searched path, so the DLM does not depend
-//!   on how a search bent (a kept plan and a new search from one pose get the same DLM); `Stop`
-//!   still comes from the path.
+//! - [`DlmMeasure::Route`] (the default, what the shipped DLM-Net was trained on): the heading
+//!   measure's rule on the floor plan's route from the robot to the goal ([`super::route`])
+//!   instead of on the searched path, so the DLM does not depend on how a search bent (a kept
+//!   plan and a new search from one pose get the same DLM); `Stop` still comes from the path.
 
 use protocol::{Dlm, Pose2D};
 
@@ -39,10 +39,11 @@ pub enum DlmMeasure {
     /// The pure-pursuit circle through the path point `window_m` ahead (DLM-Net r1's).
     Curvature,
     /// The direction of the path `heading_start_m`..`+heading_chord_m` ahead, with hysteresis
-    /// (the default since DLM-Net h1, docs/evaluation.md).
-    #[default]
+    /// (DLM-Net h1–d1, docs/evaluation.md rounds 8–9).
     Heading,
-    /// The heading measure on the floor plan's route to the goal, not on the searched path.
+    /// The heading measure on the floor plan's route to the goal, not on the searched path
+    /// (the default since DLM-Net r2, docs/evaluation.md round 10).
+    #[default]
     Route,
 }
 
@@ -102,7 +103,7 @@ pub struct DlmParams {
 impl Default for DlmParams {
     fn default() -> Self {
         Self {
-            measure: DlmMeasure::Heading,
+            measure: DlmMeasure::Route,
             window_m: 1.5,
             curvature_threshold_per_m: 0.3,
             heading_start_m: 1.0,
@@ -134,7 +135,7 @@ impl DlmParams {
         }
     }
 
-    /// The heading measure with its defaults (the default).
+    /// The heading measure with its defaults.
     #[must_use]
     pub fn heading() -> Self {
         Self {
@@ -357,7 +358,14 @@ mod tests {
     #[test]
     fn bad_params_name_the_field_and_value() {
         DlmParams::default().validate().unwrap();
-        assert_eq!(DlmParams::default(), DlmParams::heading());
+        assert_eq!(DlmParams::default().measure, DlmMeasure::Route);
+        assert_eq!(
+            DlmParams::default(),
+            DlmParams {
+                measure: DlmMeasure::Route,
+                ..DlmParams::heading()
+            }
+        );
         let bad = DlmParams {
             window_m: 0.0,
             ..DlmParams::default()
