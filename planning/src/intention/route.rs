@@ -15,9 +15,11 @@
 //! anyway), pulled taut from the robot's position: straight to the farthest point of the
 //! descent in sight (a line that keeps [`SIGHT_CLEARANCE_FRACTION`] of the robot's radius from
 //! walls), and on from there the same way, so a corner slides along with the robot instead of
-//! jumping from one coarse cell to the next. Where the descent reaches the goal's cell, the goal ends it. A kept plan and a
-//! new search, asked from the same pose, get the same route, so the same DLM; the hybrid-A*
-//! path still draws the LPE image and is what the robot is sent.
+//! jumping from one coarse cell to the next. Where the descent reaches the goal's cell, the
+//! goal ends it. A kept plan and a new search, asked from the same pose, get the same route, so
+//! the same DLM; the hybrid-A* path still draws the LPE image and is what the robot is sent.
+//! Other robots are not on the floor plan, so going round one is not a turn the DLM announces
+//! (the LPE image shows it).
 
 use std::sync::PoisonError;
 
