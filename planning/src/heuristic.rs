@@ -111,7 +111,8 @@ pub struct ObstacleHeuristic {
     settled: u64,
 }
 
-const NEIGHBOURS: [(i32, i32, f32); 8] = [
+/// The 8-connected moves of the coarse grid and their lengths in cells.
+pub(crate) const NEIGHBOURS: [(i32, i32, f32); 8] = [
     (1, 0, 1.0),
     (-1, 0, 1.0),
     (0, 1, 1.0),

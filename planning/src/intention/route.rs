@@ -25,6 +25,7 @@ use std::sync::PoisonError;
 
 use protocol::Pose2D;
 
+use crate::heuristic::NEIGHBOURS;
 use crate::map::PlanningMap;
 
 /// A point of the descent is in sight when the line to it keeps this fraction of the robot
@@ -32,18 +33,6 @@ use crate::map::PlanningMap;
 /// cell's centre may lie up to half a coarse-cell diagonal inside the inflation; the full
 /// radius would stop the pulling at every such cell.
 pub const SIGHT_CLEARANCE_FRACTION: f64 = 0.5;
-
-/// The 8 coarse-grid moves and their lengths in cells.
-const MOVES: [(i64, i64, f32); 8] = [
-    (1, 0, 1.0),
-    (-1, 0, 1.0),
-    (0, 1, 1.0),
-    (0, -1, 1.0),
-    (1, 1, std::f32::consts::SQRT_2),
-    (1, -1, std::f32::consts::SQRT_2),
-    (-1, 1, std::f32::consts::SQRT_2),
-    (-1, -1, std::f32::consts::SQRT_2),
-];
 
 /// The floor plan's route (map frame; each pose faces along its segment, the last along the
 /// one before it) from `robot`'s position towards `goal`, at least `length_m` of it where the
@@ -87,8 +76,11 @@ pub fn floor_plan_route(
     let mut descended_m = 0.0;
     while cell != goal_cell && descended_m < 1.5 * length_m + 1.0 {
         let mut best: Option<((u32, u32), f32, f32)> = None;
-        for (dx, dy, step) in MOVES {
-            let (nx, ny) = (i64::from(cell.0) + dx, i64::from(cell.1) + dy);
+        for (dx, dy, step) in NEIGHBOURS {
+            let (nx, ny) = (
+                i64::from(cell.0) + i64::from(dx),
+                i64::from(cell.1) + i64::from(dy),
+            );
             if nx < 0 || ny < 0 || nx >= width || ny >= height {
                 continue;
             }
