@@ -4,8 +4,9 @@
 # the §4.2 encounters, in parallel on all cores), then train every model of MODELS at once on the
 # one GPU on all the rounds' recordings so far (aggregated, as DAgger prescribes), warm-started
 # from the previous round's checkpoint, and export each with its card. The next round's DAgger
-# recording is driven by this round's DRIVER model. The last round's models go into one tar per
-# model under $ROUND_OUT, plus logs.tar (every round's logs and summaries).
+# recording is driven by this round's DRIVER model. Each round's models go into one tar per model
+# under $ROUND_OUT (r<round>-<kind>-<backbone>.tar) as the round ends, plus logs.tar (every
+# round's logs and summaries).
 #
 # Run from the repository root with a built eval binary and an ONNX Runtime library:
 #   EVAL=target/release/eval ORT_DYLIB_PATH=/path/libonnxruntime.so.X \
@@ -65,6 +66,14 @@ test -f "$POLICY"
     || { cat "$LOGS/record-check.log"; exit 1; }
 rm -rf "$DATA/check"
 
+# One tar per model and round: checkpoint, ONNX, card, curves, summary.
+pack() {
+    local dir=$1 tarball=$2
+    [ -d "$dir" ] && tar -C "$dir" -cf "$tarball" \
+        $(cd "$dir" && ls checkpoint_best.pt ./*.onnx card.json history.json summary.json loss.png 2>/dev/null)
+    return 0
+}
+
 # One round: recordings, in parallel, each on half the cores, stopped by the wall budget at an
 # episode boundary (then exactly the recording of --samples K), then training on everything so far.
 round() {
@@ -106,7 +115,11 @@ round() {
         grep -E '^epoch|Error|error' "$LOGS/r$r-train-$kind-$backbone.log" | head -n 40 || true
         [ -f "$dir/train/$kind-$backbone/summary.json" ] \
             && cp "$dir/train/$kind-$backbone/summary.json" "$LOGS/r$r-summary-$kind-$backbone.json"
+        # Each round's models leave at once, so that a call cut off by its time limit still
+        # returns every finished round (the rounds are compared in closed loop afterwards).
+        pack "$dir/train/$kind-$backbone" "$ROUND_OUT/r$r-$kind-$backbone.tar"
     done
+    tar -C "$LOGS" -cf "$ROUND_OUT/logs.tar" .
     return "$status"
 }
 
@@ -119,12 +132,6 @@ for r in $(seq 1 "$ROUNDS"); do
     last=$r
 done
 
-# The last complete round's models: one tar per model (checkpoint, ONNX, card, curves, summary).
-for m in $MODELS; do
-    kind=${m%%:*}; backbone=${m#*:}; dir="$DATA/r${last:-1}/train/$kind-$backbone"
-    [ -d "$dir" ] && tar -C "$dir" -cf "$ROUND_OUT/$kind-$backbone.tar" \
-        $(cd "$dir" && ls checkpoint_best.pt ./*.onnx card.json history.json summary.json loss.png 2>/dev/null)
-done
 tar -C "$LOGS" -cf "$ROUND_OUT/logs.tar" .
 ls -la "$ROUND_OUT"
 log "done after ${last:-0} of $ROUNDS rounds (status $status)"

@@ -172,6 +172,24 @@ def check_frames_and_measures(data_dir: Path, work: Path) -> None:
     assert p.returncode != 0 and "measure" in p.stderr, p.stderr[-2000:]
 
 
+def check_rebuild(data_dir: Path, work: Path) -> None:
+    """A warm start from an ONNX model alone (`training.from_onnx`): the rebuilt network agrees
+    with onnxruntime (the command checks it and fails otherwise), `train.py --init` takes it, and
+    a wrong backbone is refused by name."""
+    rebuilt = work / "rebuilt" / "checkpoint_best.pt"
+    out = run([sys.executable, "-m", "training.from_onnx", "--model", str(work / "lpe-spatial" / "lpe.onnx"),
+               "--backbone", "small-spatial", "--calibrate", str(data_dir), "--samples", "128", "--out", str(rebuilt)])
+    assert "max |torch - onnxruntime|" in out and rebuilt.is_file(), out
+    run([sys.executable, "-m", "training.train", "--kind", "lpe", "--backbone", "small-spatial", "--data", str(data_dir),
+         "--out", str(work / "lpe-warm"), "--epochs", "1", "--threads", "1", "--init", str(rebuilt)])
+    card = json.loads((work / "lpe-warm" / "card.json").read_text())
+    assert "warm-started" in card["deviations"], card["deviations"]
+    p = subprocess.run([sys.executable, "-m", "training.from_onnx", "--model", str(work / "lpe-spatial" / "lpe.onnx"),
+                        "--backbone", "small", "--calibrate", str(data_dir), "--out", str(work / "wrong.pt")],
+                       cwd=ROOT, capture_output=True, text=True)
+    assert p.returncode != 0 and "convolution" in p.stderr and not (work / "wrong.pt").exists(), p.stderr[-2000:]
+
+
 def smoke(seconds: float = 30.0, data: str | None = None, keep: str | None = None) -> list[dict]:
     with tempfile.TemporaryDirectory(prefix="training-smoke-") as tmp:
         work = Path(keep) if keep else Path(tmp)
@@ -188,6 +206,7 @@ def smoke(seconds: float = 30.0, data: str | None = None, keep: str | None = Non
              "--out", str(work / "reexport" / "dlm.onnx"), "--threads", "1"])
         assert (work / "reexport" / "dlm.onnx").is_file()
         check_frames_and_measures(data_dir, work)
+        check_rebuild(data_dir, work)
     for r in results:
         print(f"smoke {r['kind']} ({r['backbone']}): {r['epochs']} epochs, {r['samples_per_s']} samples/s, "
               f"val loss {r['val_loss']:.4f}, onnxruntime vs torch max |diff| {r['max_abs_diff']:.2e}")
