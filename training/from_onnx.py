@@ -31,9 +31,9 @@ from onnx import numpy_helper
 from torch import nn
 
 from training import data, model
+from training.train import CHECKPOINT_FORMAT
 
 TOLERANCE = 1e-4
-CHECKPOINT_FORMAT = "intention-fleet-checkpoint"
 
 
 def conv_pairs(net: nn.Module) -> list[tuple[str, nn.Conv2d, nn.BatchNorm2d]]:
