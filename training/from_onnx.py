@@ -47,9 +47,8 @@ def conv_pairs(net: nn.Module) -> list[tuple[str, nn.Conv2d, nn.BatchNorm2d]]:
     return pairs
 
 
-def onnx_convs(graph: onnx.GraphProto) -> list[tuple[np.ndarray, np.ndarray | None]]:
+def onnx_convs(graph: onnx.GraphProto, inits: dict[str, np.ndarray]) -> list[tuple[np.ndarray, np.ndarray | None]]:
     """(weight, bias) of each Conv node in graph order."""
-    inits = {i.name: numpy_helper.to_array(i) for i in graph.initializer}
     out = []
     for node in graph.node:
         if node.op_type == "Conv":
@@ -76,12 +75,12 @@ def rebuild(onnx_path: str, config: dict, feeds: dict[str, np.ndarray]) -> nn.Mo
     net = model.build(config)
     state = net.state_dict()
     inits = {i.name: numpy_helper.to_array(i) for i in proto.graph.initializer}
-    pairs, convs = conv_pairs(net), onnx_convs(proto.graph)
+    pairs, convs = conv_pairs(net), onnx_convs(proto.graph, inits)
     if len(pairs) != len(convs):
         raise SystemExit(f"{onnx_path}: {len(convs)} convolutions, the {config} network has {len(pairs)}")
     filled: set[str] = set()
     biases = {}
-    for (name, conv, bn), (w, b) in zip(pairs, convs):
+    for (name, conv, _), (w, b) in zip(pairs, convs):
         if tuple(conv.weight.shape) != w.shape:
             raise SystemExit(f"{onnx_path}: convolution {name} is {w.shape} there, {tuple(conv.weight.shape)} here")
         state[f"{name}.0.weight"] = torch.from_numpy(w.copy())
