@@ -8,10 +8,11 @@ The export folds each batch norm into the convolution before it (weight and a ne
 the ONNX graph no longer holds the norm's statistics. The rebuilt network puts the folded
 weight into the convolution (which has no bias) and, per channel, sets the batch norm so that
 it adds the folded bias and is the identity otherwise: its running mean and variance are the
-convolution's output statistics on real frames as training sees them, augmented (`--calibrate`,
-a recording at the model's image size), its scale and shift undo them. In evaluation mode the rebuilt network is then
-the ONNX model exactly, and in training mode, where batch norm uses the batch's statistics,
-nearly so, rather than starting the round from a network whose norms are all wrong.
+convolution's output statistics on real frames as training sees them, augmented
+(`--calibrate`, a recording at the model's image size), and its scale and shift undo them. In
+evaluation mode the rebuilt network is then the ONNX model exactly, and in training mode, where
+batch norm uses the batch's statistics, nearly so, rather than starting the round from a
+network whose norms are all wrong.
 
 Checked, failing loudly: every parameter and buffer is set, and onnxruntime and the rebuilt
 network agree to 1e-4 on the calibration frames.
