@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The training path's smoke tests, on the CPU (training/README.md): a tiny recording in the
 # format `eval record` writes -> `python -m training.train` for each kind -> ONNX export with its
-# card -> checked against ONNX Runtime; and the layer-activation figure of the shipped models.
+# card -> checked against ONNX Runtime; the layer-activation figure of the shipped models; and
+# the weight average of exported models (training/average.py) on the fixtures.
 # Installs PyTorch and the training dependencies into .venv first (scripts/setup.sh made it;
 # about 5 GB, most of it the CUDA libraries PyPI's wheel carries). Not part of the README's
 # test command: CI runs it after the Rust tests.
@@ -22,3 +23,4 @@ if ! "$PY" -c 'import torch, onnx, matplotlib, tqdm, PIL' 2>/dev/null; then
 fi
 "$PY" training/tests/test_smoke.py --seconds "$secs"
 "$PY" training/tests/test_activations.py
+"$PY" training/tests/test_average.py

@@ -20,7 +20,7 @@
 # it exists), LR (1e-3; later rounds, warm-started, use LR_LATER, 3e-4), GEN_FIRST (1000: round
 # r records on buildings GEN_FIRST + (r-1) GEN.., the expert 2000 higher: never the same twice),
 # ENCOUNTER_KINDS (the scripted encounters' kinds, comma-separated, e.g. furniture,glass_door;
-# default all five).
+# default all six).
 # The small CPU check runs it with tiny budgets (see training/README.md).
 set -euo pipefail
 

@@ -214,7 +214,7 @@ pub struct TableArgs {
     #[arg(long)]
     no_recovery: bool,
     /// Puts this scripted encounter (`person_ahead`, `person_oncoming`, `glass_door`,
-    /// `robot_parked`, `furniture`; as `eval record --encounters` draws them) on the path from
+    /// `robot_parked`, `furniture`, `open_glass_door`; as `eval record --encounters` draws them) on the path from
     /// each scenario's start to its first goal, named `<scenario>-<kind>`; scenarios where it
     /// does not fit are left out. With `--generated N`: the situation on N buildings.
     #[arg(long)]
@@ -267,10 +267,10 @@ pub struct RecordArgs {
     noise: f64,
     /// Probability that an episode gets a scripted encounter on its first leg: a person
     /// ahead, a person coming towards the robot or a shut glass door (paper §4.2), a parked
-    /// robot, furniture in the way ...
+    /// robot, furniture in the way, an open glass door off the drawn path ...
     #[arg(long, default_value_t = 0.0)]
     encounters: f64,
-    /// ... of these kinds (comma-separated; default all five), tried in a random order, the
+    /// ... of these kinds (comma-separated; default all six), tried in a random order, the
     /// first that fits: `--encounter-kinds furniture` records only furniture in the way.
     #[arg(long, value_delimiter = ',', requires = "encounters")]
     encounter_kinds: Vec<Encounter>,

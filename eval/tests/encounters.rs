@@ -1,7 +1,8 @@
 //! Scripted encounters (`eval record --encounters P`): each kind fits on a real training
 //! scenario's routes, a glass door really closes the passage from wall to wall, and the
 //! privileged expert, which labels these episodes, stops short of the door, keeps clear of the
-//! people without contact and goes round a parked robot and furniture in its way.
+//! people without contact, goes round a parked robot and furniture in its way and through the
+//! middle of an open glass door the drawn path passes off-centre.
 
 #![allow(clippy::unwrap_used)]
 use std::collections::BTreeMap;
@@ -153,6 +154,42 @@ fn every_kind_fits_and_the_expert_handles_it_without_contact() {
                 });
                 assert!(free, "no 0.9 m passage beside the furniture");
             }
+            Encounter::OpenGlassDoor => {
+                assert_eq!(s.glass.len(), base.scenario.glass.len() + 2);
+                let panes = &s.glass[s.glass.len() - 2..];
+                // Each pane starts in a wall; the other ends leave the opening between them.
+                let wall_m = |x: f64, y: f64| {
+                    let g = base.planning.to_grid(protocol::Pose2D::new(x, y, 0.0));
+                    base.planning.clearance_m(g.x_m, g.y_m)
+                };
+                assert!(wall_m(panes[0].x0_m, panes[0].y0_m) < 0.06, "{panes:?}");
+                assert!(wall_m(panes[1].x1_m, panes[1].y1_m) < 0.06, "{panes:?}");
+                let opening_m =
+                    (panes[1].x0_m - panes[0].x1_m).hypot(panes[1].y0_m - panes[0].y1_m);
+                assert!((0.98..=1.42).contains(&opening_m), "opening {opening_m} m");
+                // The drawn path goes through the opening, off its middle by at most 0.35 m.
+                let mut planner = planning::Planner::new(
+                    std::sync::Arc::clone(&base.planning),
+                    options.intention.planner.clone(),
+                )
+                .unwrap();
+                let start = protocol::Pose2D::new(s.start.x_m, s.start.y_m, s.start.yaw_rad);
+                let goal = planning::Goal::at(s.goals[0].x_m, s.goals[0].y_m).pose_from(start);
+                let path = planner.plan(start, goal).unwrap();
+                let middle = (
+                    0.5 * (panes[0].x1_m + panes[1].x0_m),
+                    0.5 * (panes[0].y1_m + panes[1].y0_m),
+                );
+                let off_m = path
+                    .poses
+                    .iter()
+                    .map(|p| (p.x_m - middle.0).hypot(p.y_m - middle.1))
+                    .fold(f64::INFINITY, f64::min);
+                assert!(
+                    off_m <= 0.4,
+                    "the path passes {off_m} m from the opening's middle"
+                );
+            }
             Encounter::PersonAhead | Encounter::PersonOncoming => {
                 assert_eq!(s.people.len(), base.scenario.people.len() + 1);
                 let person = s.people.last().unwrap();
@@ -172,8 +209,11 @@ fn every_kind_fits_and_the_expert_handles_it_without_contact() {
         if *kind == Encounter::Furniture {
             assert_eq!(result.collisions.furniture, 0, "{result:?}");
         }
-        if matches!(kind, Encounter::RobotParked | Encounter::Furniture) {
-            // Gone round, not followed for ever.
+        if matches!(
+            kind,
+            Encounter::RobotParked | Encounter::Furniture | Encounter::OpenGlassDoor
+        ) {
+            // Gone round (or through), not followed or waited at for ever.
             assert_eq!(result.goals_reached, 1, "{result:?}");
         }
         if *kind == Encounter::GlassDoor {
