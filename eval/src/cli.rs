@@ -205,6 +205,11 @@ pub struct TableArgs {
     /// stays for the commands written when it was not.
     #[arg(long)]
     path_reuse: bool,
+    /// Plans the shortest smoothed path, without moving it to the middle of corridors and
+    /// doorways (`[planner.centring]` off): the paths of every table before 2026-11-27's
+    /// fourteenth session, and of the recordings the shipped networks learned from.
+    #[arg(long)]
+    no_centring: bool,
     /// Hands each controller's command to the base unchecked, without the agent's collision
     /// monitor (`[safety.collision_monitor]`): the learned controllers alone, as in the paper.
     #[arg(long)]
@@ -555,6 +560,9 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
         intention: {
             let mut intention = options.intention;
             intention.reuse.enabled = args.keeps_paths();
+            if args.no_centring {
+                intention.planner.centring.enabled = false;
+            }
             intention.dlm.measure = dlm_measure_for(
                 args.dlm_measure,
                 methods

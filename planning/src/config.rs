@@ -5,6 +5,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::centring::CentringParams;
 use crate::error::PlanError;
 
 /// Parameters of hybrid A* for one robot model (the `[planner]` table of the config file).
@@ -62,6 +63,8 @@ pub struct PlannerConfig {
     pub path_spacing_m: f64,
     /// Whether to shortcut-smooth the path with collision-checked Dubins curves.
     pub smooth: bool,
+    /// Moving the smoothed path to the middle of corridors and doorways (`[planner.centring]`).
+    pub centring: CentringParams,
 }
 
 impl Default for PlannerConfig {
@@ -90,6 +93,7 @@ impl Default for PlannerConfig {
             max_expansions: 1_000_000,
             path_spacing_m: 0.05,
             smooth: true,
+            centring: CentringParams::default(),
         }
     }
 }
@@ -186,6 +190,13 @@ impl PlannerConfig {
                 "max_expansions",
                 0,
                 "must be >= 1",
+            ));
+        }
+        if let Some((field, value)) = self.centring.invalid() {
+            return Err(PlanError::invalid_config(
+                field,
+                value,
+                "must be >= 0 and finite",
             ));
         }
         Ok(())

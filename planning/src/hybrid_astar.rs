@@ -28,7 +28,7 @@ use crate::error::{Endpoint, PlanError};
 use crate::heuristic::{MinKey, ObstacleHeuristic};
 use crate::map::{Disc, GridPose, PlanningMap};
 use crate::path::{Path, PathStats};
-use crate::smoother;
+use crate::{centring, smoother};
 
 /// Multiply-shift hasher for the lattice keys: SipHash would cost more than the search step.
 #[derive(Default)]
@@ -302,6 +302,14 @@ impl Planner {
                 self.config.path_spacing_m,
             );
         }
+        grid_poses = centring::centre(
+            &map,
+            &self.avoid,
+            &grid_poses,
+            &self.config.centring,
+            self.config.min_turning_radius_m,
+            self.config.path_spacing_m,
+        );
         let mut poses: Vec<Pose2D> = grid_poses.iter().map(|p| map.to_world(*p)).collect();
         if let Some(first) = poses.first_mut() {
             *first = Pose2D::new(start.x_m, start.y_m, normalize_angle(start.yaw_rad));

@@ -7,12 +7,14 @@
 //! path ([`intention`]).
 //!
 //! - [`hybrid_astar`], [`dubins`], [`smoother`], [`heuristic`], [`map`], [`path`], [`config`],
-//!   [`error`]: the search (Dolgov et al. 2010) with its cached obstacle heuristic.
+//!   [`error`]: the search (Dolgov et al. 2010) with its cached obstacle heuristic;
+//!   [`centring`] moves its smoothed path to the middle of corridors and doorways.
 //! - [`grid_astar`]: the plain 8-connected 2-D A* used as a benchmark reference.
 //! - [`sample`]: seeded random start/goal pairs; [`picture`]: map + path pictures.
 //!
 //! This crate depends on `protocol` and `map-core` only: no storage, no HTTP, no session.
 
+pub mod centring;
 pub mod config;
 pub mod dubins;
 pub mod error;
@@ -27,6 +29,7 @@ pub mod picture;
 pub mod sample;
 pub mod smoother;
 
+pub use centring::CentringParams;
 pub use config::PlannerConfig;
 pub use error::{Endpoint, PlanError};
 pub use goals::{Advance, Goal, GoalProgress};
