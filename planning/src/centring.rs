@@ -42,6 +42,9 @@ pub struct CentringParams {
     pub max_shift_m: f64,
     /// Length of the moving average the shifts are smoothed with (applied twice).
     pub window_m: f64,
+    /// The tightest bend a shift may make (the robot turns on the spot, so the search's
+    /// turning radius is a preference for smooth paths, not a limit of the base).
+    pub min_radius_m: f64,
     /// A stretch at most this long where one side is open (a door in a corridor's wall, a side
     /// corridor) between two stretches of passage keeps to the line between their middles.
     pub bridge_m: f64,
@@ -58,6 +61,7 @@ impl Default for CentringParams {
             max_shift_m: 0.6,
             window_m: 1.5,
             bridge_m: 2.5,
+            min_radius_m: 0.3,
             taper_m: 2.0,
         }
     }
@@ -72,6 +76,7 @@ impl CentringParams {
             ("centring.max_shift_m", self.max_shift_m),
             ("centring.window_m", self.window_m),
             ("centring.bridge_m", self.bridge_m),
+            ("centring.min_radius_m", self.min_radius_m),
             ("centring.taper_m", self.taper_m),
         ]
         .into_iter()
@@ -183,13 +188,28 @@ fn moving_average(values: &[f64], half: usize) -> Vec<f64> {
         .collect()
 }
 
+/// The minimum of `values` over `half` samples on each side.
+fn moving_minimum(values: &[f64], half: usize) -> Vec<f64> {
+    let n = values.len();
+    (0..n)
+        .map(|i| {
+            values[i.saturating_sub(half)..(i + half + 1).min(n)]
+                .iter()
+                .copied()
+                .fold(f64::INFINITY, f64::min)
+        })
+        .collect()
+}
+
 /// The path moved to the middle of the passages it runs through (see the module docs); the
 /// first and last poses are kept exactly. `discs` (grid frame) count as obstacles.
 ///
-/// The result keeps what the search guarantees: every pose free, no turn tighter than
-/// `rho_m`, poses at most 1.5 × `spacing_m` apart. Where the shifted path would break one
-/// (a shift towards the inside of a tight bend), its positions are averaged over longer
-/// stretches ([`SMOOTHING_STRETCH`]); failing that, the original path is kept.
+/// The result keeps what the search guarantees, with one exception: every pose free, poses at
+/// most 1.5 × `spacing_m` apart, heading continuous; a moved stretch may bend down to
+/// [`CentringParams::min_radius_m`] (the search keeps to `rho_m`; stretches that did not
+/// move keep the search's poses exactly). Where the shifted path would break that (a shift
+/// towards the inside of a tight bend, round a corner), the shift is halved round the spot,
+/// and then taken away there; failing that, the original path is kept.
 #[must_use]
 pub fn centre(
     map: &PlanningMap,
@@ -201,6 +221,10 @@ pub fn centre(
 ) -> Vec<GridPose> {
     let n = poses.len();
     if !p.enabled || n < 3 || p.max_shift_m <= 0.0 {
+        return poses.to_vec();
+    }
+    let rho_m = rho_m.min(p.min_radius_m);
+    if rho_m <= 0.0 {
         return poses.to_vec();
     }
     let mut s_m = Vec::with_capacity(n);
@@ -251,88 +275,118 @@ pub fn centre(
         .collect();
     #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
     let half = ((0.5 * p.window_m / step_m).round() as usize).max(1);
-    // A shift towards the inside of a bend tightens it: at curvature k a shift o inwards makes
-    // it k / (1 - o k), so inwards it may be at most 1/k - rho (with a margin), and none on a
-    // bend the search drove at the turning radius. The bound is taken before and after the
-    // averaging, which would carry shifts onto the bend again; the ramp too.
-    let room = inward_room(poses, &s_m, rho_m);
-    let bounded = |o: f64, i: usize| {
-        let (inward_sign, limit) = room[i];
-        if o * inward_sign > 0.0 {
-            o.clamp(-limit, limit)
-        } else {
-            o
-        }
-    };
-    let wanted: Vec<f64> = wanted
-        .iter()
-        .enumerate()
-        .map(|(i, &o)| bounded(o, i))
-        .collect();
     let shift: Vec<f64> = moving_average(&moving_average(&wanted, half), half)
         .iter()
         .zip(&ramp)
-        .enumerate()
-        .map(|(i, (o, r))| bounded(o * r, i))
+        .map(|(o, r)| o * r)
         .collect();
-
-    // A shifted bend can come out tighter than the robot turns: the moved positions are averaged
-    // over longer stretches until it does not.
-    for stretch in SMOOTHING_STRETCH {
-        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-        let half_pos = ((stretch * half as f64).round() as usize).max(1);
+    // A shift towards the inside of a bend tightens it, and one round a corner may run into
+    // it. Where the moved path bends tighter than the robot may turn or is not free, the
+    // shift round the spot is halved, by a factor that is itself
+    // smooth (the halving's minimum over a window, averaged over the same window), and the path
+    // moved again; the search's own bends are not the question, the moved path's are (a bend
+    // that takes the shortest path across to a wall disappears once the path keeps to the
+    // middle).
+    let kappa_max = 1.0 / rho_m;
+    let mut factor = vec![1.0; n];
+    for _ in 0..HALVING_ROUNDS {
+        let scaled: Vec<f64> = shift.iter().zip(&factor).map(|(o, f)| o * f).collect();
+        let moved: Vec<(f64, f64)> = poses
+            .iter()
+            .zip(&normals)
+            .zip(&scaled)
+            .map(|((q, &(nx, ny)), &o)| (q.x_m + o * nx, q.y_m + o * ny))
+            .collect();
+        let free = |&(x, y): &(f64, f64)| map.clearance_among(discs, x, y) >= map.robot_radius_m();
+        let need: Vec<f64> = bend_curvature(&moved, &s_m, CURVATURE_REACH_M)
+            .iter()
+            .zip(&scaled)
+            .zip(&moved)
+            .map(|((k, o), q)| {
+                if o.abs() > 1e-9 && (*k > kappa_max || !free(q)) {
+                    0.5
+                } else {
+                    1.0
+                }
+            })
+            .collect();
+        if need.iter().all(|&v| v >= 1.0) {
+            break;
+        }
+        let step = moving_average(&moving_minimum(&need, half), half);
+        for (f, s) in factor.iter_mut().zip(&step) {
+            *f *= s;
+        }
+    }
+    // The moved positions are averaged (over half the shifts' length) and checked; where a
+    // spot still breaks a rule, the shift round it is taken away (by the same smooth factor)
+    // and the rest tried again; after [`LOCAL_ROUNDS`] the original path is kept.
+    #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+    let half_pos = (half / 2).max(1);
+    for _ in 0..LOCAL_ROUNDS {
+        let scaled: Vec<f64> = shift.iter().zip(&factor).map(|(o, f)| o * f).collect();
         let (moved, verbatim) = reshaped(
-            map, discs, poses, &normals, &shift, &ramp, half_pos, spacing_m,
+            map, discs, poses, &normals, &scaled, &ramp, half_pos, spacing_m,
         );
         let bad = violations(map, discs, &moved, &verbatim, rho_m);
         if bad.is_empty() {
             return moved;
         }
+        let mut need = vec![1.0; n];
+        for b in bad {
+            let (x, y) = (moved[b].x_m, moved[b].y_m);
+            let k = (0..n)
+                .min_by(|&i, &j| {
+                    let di = (poses[i].x_m - x).hypot(poses[i].y_m - y);
+                    let dj = (poses[j].x_m - x).hypot(poses[j].y_m - y);
+                    di.total_cmp(&dj)
+                })
+                .unwrap_or(0);
+            need[k] = 0.0;
+        }
+        let step = moving_average(&moving_minimum(&need, 2 * half), half);
+        for (f, s) in factor.iter_mut().zip(&step) {
+            *f *= s;
+        }
     }
     poses.to_vec()
 }
 
-/// How many times the shifts' averaging length [`centre`] averages the moved positions over,
-/// in the order tried.
-const SMOOTHING_STRETCH: [f64; 4] = [0.5, 1.0, 2.0, 3.0];
+/// Rounds of [`centre`]'s local retreat before it keeps the original path.
+const LOCAL_ROUNDS: usize = 5;
 
-/// The share of the room inside a bend (1/k - rho) a shift may take.
-const INWARD_MARGIN: f64 = 0.7;
-/// The path's curvature at a pose is the largest within this arc length of it.
-const CURVATURE_REACH_M: f64 = 0.3;
+/// Rounds of halving the shift round bends that come out too tight, in [`centre`].
+const HALVING_ROUNDS: usize = 8;
 
-/// For each pose, the side of the path its bend turns to (+1 left, -1 right) and how far a
-/// shift towards that side may go (see [`centre`]).
-fn inward_room(poses: &[GridPose], s_m: &[f64], rho_m: f64) -> Vec<(f64, f64)> {
-    let n = poses.len();
-    let curvature: Vec<f64> = (0..n)
-        .map(|i| {
-            let (a, b) = (i.saturating_sub(1), (i + 1).min(n - 1));
-            let ds = s_m[b] - s_m[a];
-            if ds > 1e-6 {
-                normalize_angle(poses[b].yaw_rad - poses[a].yaw_rad) / ds
-            } else {
-                0.0
-            }
-        })
-        .collect();
+/// Unsigned curvature of the polyline `points` at each point: the turn between the chords to
+/// the points `reach_m` of arc length (of the original path, `s_m`) before and after it, over
+/// that length.
+fn bend_curvature(points: &[(f64, f64)], s_m: &[f64], reach_m: f64) -> Vec<f64> {
+    let n = points.len();
     (0..n)
         .map(|i| {
-            let lo = s_m.partition_point(|&s| s < s_m[i] - CURVATURE_REACH_M);
-            let hi = s_m.partition_point(|&s| s <= s_m[i] + CURVATURE_REACH_M);
-            let k = curvature[lo..hi.max(lo + 1).min(n)]
-                .iter()
-                .copied()
-                .fold(0.0_f64, |m, k| if k.abs() > m.abs() { k } else { m });
-            let limit = if k.abs() > 1e-6 {
-                (INWARD_MARGIN * (1.0 / k.abs() - rho_m)).max(0.0)
-            } else {
-                f64::INFINITY
-            };
-            (k.signum(), limit)
+            let a = s_m.partition_point(|&s| s < s_m[i] - reach_m).min(i);
+            let b = s_m
+                .partition_point(|&s| s <= s_m[i] + reach_m)
+                .clamp(i + 1, n)
+                - 1;
+            if a == i || b == i {
+                return 0.0;
+            }
+            let (p, q, r) = (points[a], points[i], points[b]);
+            let (l1, l2) = ((q.0 - p.0).hypot(q.1 - p.1), (r.0 - q.0).hypot(r.1 - q.1));
+            if l1 < 1e-6 || l2 < 1e-6 {
+                return 0.0;
+            }
+            let turn = normalize_angle((r.1 - q.1).atan2(r.0 - q.0) - (q.1 - p.1).atan2(q.0 - p.0));
+            turn.abs() / (0.5 * (l1 + l2))
         })
         .collect()
 }
+
+/// The moved path's curvature at a pose is measured over this arc length either side.
+const CURVATURE_REACH_M: f64 = 0.15;
+
 /// The second average applies in full where the shift is at least this.
 const SMOOTH_FULL_M: f64 = 0.05;
 

@@ -291,7 +291,7 @@ fn a_kept_plan_answers_like_a_new_search_while_the_robot_follows_it() {
 /// Issue 16's measure with the heading DLM (planning `DlmMeasure::Heading`): the direction of
 /// the route 1-2 m ahead with hysteresis, instead of one point's bearing.
 #[test]
-fn with_the_heading_dlm_a_kept_plan_gives_the_dlm_of_a_new_search_in_99_percent_of_cycles() {
+fn with_the_heading_dlm_a_kept_plan_gives_the_dlm_of_a_new_search_as_often_as_a_new_search_does() {
     let heading = kept_against_new(DlmParams::heading());
     println!(
         "heading DLM, {} cycles: same as a new search {}, a new search with other jitter {}",
@@ -299,13 +299,16 @@ fn with_the_heading_dlm_a_kept_plan_gives_the_dlm_of_a_new_search_in_99_percent_
     );
     // Measured 2026-11-27: 1 313 of 1 313 (kept = new) and 1 309 (new = new) on these six
     // routes; over 210 routes on seven maps 98.8 % and 98.9 % (docs/benchmarks.md, "A DLM
-    // that holds").
+    // that holds"). With paths kept to the middle of passages (planning::centring, the
+    // default since the fourteenth session) 1 277 and 1 275 of 1 291: a kept plan agrees with
+    // a new search as often as a new search with itself, and that is now just under 99 %.
     assert!(heading.cycles > 300, "{} cycles", heading.cycles);
     assert!(
-        heading.same() >= 0.99,
-        "same DLM in {:.3} of {} cycles",
+        heading.same() >= 0.985 && heading.same() >= heading.repeatable() - 0.005,
+        "same DLM in {:.3} of {} cycles, a new search with itself {:.3}",
         heading.same(),
-        heading.cycles
+        heading.cycles,
+        heading.repeatable()
     );
     assert!(
         heading.repeatable() >= 0.98,
