@@ -75,6 +75,18 @@ fn encounters_on(name: &str) -> (Prepared, BTreeMap<Encounter, Prepared>) {
     (base, found)
 }
 
+/// The floor plan's path from the scenario's start to its first goal.
+fn first_leg(base: &Prepared, s: &sim::Scenario, options: &TableOptions) -> planning::Path {
+    let mut planner = planning::Planner::new(
+        std::sync::Arc::clone(&base.planning),
+        options.intention.planner.clone(),
+    )
+    .unwrap();
+    let start = protocol::Pose2D::new(s.start.x_m, s.start.y_m, s.start.yaw_rad);
+    let goal = planning::Goal::at(s.goals[0].x_m, s.goals[0].y_m).pose_from(start);
+    planner.plan(start, goal).unwrap()
+}
+
 #[test]
 fn every_kind_fits_and_the_expert_handles_it_without_contact() {
     let (base, found) = encounters_on("train_office.yaml");
@@ -118,14 +130,7 @@ fn every_kind_fits_and_the_expert_handles_it_without_contact() {
                 let shape = s.furniture.last().unwrap().shape();
                 assert!(shape.distance(s.start.x_m, s.start.y_m) >= 0.5);
                 // It stands in the way of a robot keeping to the floor plan's path ...
-                let mut planner = planning::Planner::new(
-                    std::sync::Arc::clone(&base.planning),
-                    options.intention.planner.clone(),
-                )
-                .unwrap();
-                let start = protocol::Pose2D::new(s.start.x_m, s.start.y_m, s.start.yaw_rad);
-                let goal = planning::Goal::at(s.goals[0].x_m, s.goals[0].y_m).pose_from(start);
-                let path = planner.plan(start, goal).unwrap();
+                let path = first_leg(&base, s, &options);
                 let closest_m = path
                     .poses
                     .iter()
@@ -133,11 +138,10 @@ fn every_kind_fits_and_the_expert_handles_it_without_contact() {
                     .fold(f64::INFINITY, f64::min);
                 assert!(closest_m < 0.25, "the path passes {closest_m} m from it");
                 eprintln!(
-                    "furniture {:?} path {} m start {:?} goal {:?}",
+                    "furniture {:?} path {} m from {:?}",
                     s.furniture.last(),
                     path.length_m,
-                    start,
-                    goal
+                    s.start
                 );
                 // ... and leaves a passage beside it.
                 let world = World::new(s.clone(), base.plan.clone(), SimConfig::default()).unwrap();
@@ -168,14 +172,7 @@ fn every_kind_fits_and_the_expert_handles_it_without_contact() {
                     (panes[1].x0_m - panes[0].x1_m).hypot(panes[1].y0_m - panes[0].y1_m);
                 assert!((0.98..=1.42).contains(&opening_m), "opening {opening_m} m");
                 // The drawn path goes through the opening, off its middle by at most 0.35 m.
-                let mut planner = planning::Planner::new(
-                    std::sync::Arc::clone(&base.planning),
-                    options.intention.planner.clone(),
-                )
-                .unwrap();
-                let start = protocol::Pose2D::new(s.start.x_m, s.start.y_m, s.start.yaw_rad);
-                let goal = planning::Goal::at(s.goals[0].x_m, s.goals[0].y_m).pose_from(start);
-                let path = planner.plan(start, goal).unwrap();
+                let path = first_leg(&base, s, &options);
                 let middle = (
                     0.5 * (panes[0].x1_m + panes[1].x0_m),
                     0.5 * (panes[0].y1_m + panes[1].y0_m),

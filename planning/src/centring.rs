@@ -227,14 +227,8 @@ pub fn centre(
     if rho_m <= 0.0 {
         return poses.to_vec();
     }
-    let mut s_m = Vec::with_capacity(n);
-    let mut acc = 0.0;
-    s_m.push(0.0);
-    for w in poses.windows(2) {
-        acc += (w[1].x_m - w[0].x_m).hypot(w[1].y_m - w[0].y_m);
-        s_m.push(acc);
-    }
-    let length_m = acc;
+    let s_m = GridPose::arc_lengths(poses);
+    let length_m = s_m[n - 1];
     if length_m <= 0.0 {
         return poses.to_vec();
     }
@@ -358,6 +352,17 @@ const LOCAL_ROUNDS: usize = 5;
 /// Rounds of halving the shift round bends that come out too tight, in [`centre`].
 const HALVING_ROUNDS: usize = 8;
 
+/// The indices of the first pose at most `reach_m` of arc length before pose `i` and the last
+/// at most that far after it (`i` itself at the ends).
+fn reach(s_m: &[f64], i: usize, reach_m: f64) -> (usize, usize) {
+    let a = s_m.partition_point(|&s| s < s_m[i] - reach_m).min(i);
+    let b = s_m
+        .partition_point(|&s| s <= s_m[i] + reach_m)
+        .clamp(i + 1, s_m.len())
+        - 1;
+    (a, b)
+}
+
 /// Unsigned curvature of the polyline `points` at each point: the turn between the chords to
 /// the points `reach_m` of arc length (of the original path, `s_m`) before and after it, over
 /// that length.
@@ -365,11 +370,7 @@ fn bend_curvature(points: &[(f64, f64)], s_m: &[f64], reach_m: f64) -> Vec<f64> 
     let n = points.len();
     (0..n)
         .map(|i| {
-            let a = s_m.partition_point(|&s| s < s_m[i] - reach_m).min(i);
-            let b = s_m
-                .partition_point(|&s| s <= s_m[i] + reach_m)
-                .clamp(i + 1, n)
-                - 1;
+            let (a, b) = reach(s_m, i, reach_m);
             if a == i || b == i {
                 return 0.0;
             }
@@ -401,11 +402,7 @@ fn normals(poses: &[GridPose], s_m: &[f64], reach_m: f64) -> Vec<(f64, f64)> {
     let n = poses.len();
     (0..n)
         .map(|i| {
-            let a = s_m.partition_point(|&s| s < s_m[i] - reach_m).min(i);
-            let b = s_m
-                .partition_point(|&s| s <= s_m[i] + reach_m)
-                .clamp(i + 1, n)
-                - 1;
+            let (a, b) = reach(s_m, i, reach_m);
             let (dx, dy) = (poses[b].x_m - poses[a].x_m, poses[b].y_m - poses[a].y_m);
             let yaw = if dx.hypot(dy) > 1e-6 {
                 dy.atan2(dx)

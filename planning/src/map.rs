@@ -96,6 +96,21 @@ pub struct GridPose {
     pub yaw_rad: f64,
 }
 
+impl GridPose {
+    /// The arc length from the first of `poses` to each of them, along the straight steps.
+    #[must_use]
+    pub fn arc_lengths(poses: &[GridPose]) -> Vec<f64> {
+        let mut acc = 0.0;
+        let mut out = Vec::with_capacity(poses.len());
+        out.push(0.0);
+        for w in poses.windows(2) {
+            acc += (w[1].x_m - w[0].x_m).hypot(w[1].y_m - w[0].y_m);
+            out.push(acc);
+        }
+        out
+    }
+}
+
 impl PlanningMap {
     /// Prepares `grid` for a robot of `config.robot_radius_m`, keyed by its content hash.
     ///

@@ -30,13 +30,7 @@ pub fn shortcut(
     if n < 3 {
         return poses.to_vec();
     }
-    let mut cum = Vec::with_capacity(n);
-    let mut acc = 0.0;
-    cum.push(0.0);
-    for w in poses.windows(2) {
-        acc += (w[1].x_m - w[0].x_m).hypot(w[1].y_m - w[0].y_m);
-        cum.push(acc);
-    }
+    let cum = GridPose::arc_lengths(poses);
     let mut out = vec![poses[0]];
     let mut i = 0;
     while i < n - 1 {
