@@ -6,22 +6,25 @@
 //! corner to corner. What the floor plan does not have stands in exactly that lane: a cabinet
 //! by the wall, the pane beside the opening of a glass door. Every controller that follows the
 //! path is led past them with centimetres to spare, and the laser does not see glass
-//! (docs/evaluation.md: every glass contact of the deployed LPE-Net and 43 of the dynamic
-//! window's in 100 task runs were at the panes beside the table's open glass doors). Nav2's
+//! (docs/evaluation.md, round 12: all 23 glass contacts of the deployed LPE-Net and 39 of the
+//! dynamic window's 43 in 100 task runs were at the panes beside the tasks' open glass doors). Nav2's
 //! planners keep to the middle for the same reason: their costmaps charge for cells near
 //! walls.
 //!
-//! Here, after smoothing: at each pose, the walls are found along the path's normal on both
-//! sides (a sphere trace on the distance field); where they are at most
+//! Here, after smoothing: at each pose, the walls are found along the path's normal (taken over
+//! half a metre of path, so that poses where two shortcuts meet do not cross when moved) on both
+//! sides, by a sphere trace on the distance field; where they are at most
 //! [`CentringParams::passage_max_m`] apart, the pose wants to move to the middle between them,
 //! by at most [`CentringParams::max_shift_m`]; across a short opening in one side (a door off a
 //! corridor) it keeps to the line between the middles on either side of it; elsewhere (a room,
-//! an open hall) it stays. The
-//! wanted shifts are tapered to zero at both ends of the path (the start is the robot, the end
-//! the goal) and smoothed along the path twice with a moving average over
-//! [`CentringParams::window_m`], so the path eases across instead of stepping; a shifted pose
-//! that would not be free is pulled back towards the original. Headings are taken from the
-//! shifted positions. Turns on the spot stay where they are, with the same taper round them.
+//! an open hall) it stays. The wanted shifts are averaged along the path twice over
+//! [`CentringParams::window_m`], so the path eases across instead of stepping, and grow from
+//! zero (a smoothstep over [`CentringParams::taper_m`]) from the robot, to the goal and round
+//! turns on the spot, which stay as they are. Where the moved path would bend tighter than
+//! [`CentringParams::min_radius_m`] or not be free (a shift towards the inside of a bend, round
+//! a corner), the shift round the spot is halved by a smooth factor, and where a spot still
+//! breaks a rule it is taken away there. Headings follow the moved positions; poses that did
+//! not move keep the search's exactly. A path that cannot be centred is kept as searched.
 //!
 //! Plain data in and out, in the grid frame, as the smoother.
 
@@ -275,12 +278,11 @@ pub fn centre(
         .map(|(o, r)| o * r)
         .collect();
     // A shift towards the inside of a bend tightens it, and one round a corner may run into
-    // it. Where the moved path bends tighter than the robot may turn or is not free, the
-    // shift round the spot is halved, by a factor that is itself
-    // smooth (the halving's minimum over a window, averaged over the same window), and the path
-    // moved again; the search's own bends are not the question, the moved path's are (a bend
-    // that takes the shortest path across to a wall disappears once the path keeps to the
-    // middle).
+    // it. Where the moved path bends tighter than the robot may turn or is not free, the shift
+    // round the spot is halved, by a factor that is itself smooth (the halving's minimum over
+    // a window, averaged over the same window), and the path moved again. The moved path's
+    // bends are what count, not the search's: a bend that takes the shortest path across to a
+    // wall disappears once the path keeps to the middle.
     let kappa_max = 1.0 / rho_m;
     let mut factor = vec![1.0; n];
     for _ in 0..HALVING_ROUNDS {
