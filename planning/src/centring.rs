@@ -418,10 +418,12 @@ fn normals(poses: &[GridPose], s_m: &[f64], reach_m: f64) -> Vec<(f64, f64)> {
 
 /// `poses` each moved `shift` along its normal, pulled back towards the original until free
 /// (the original is); the moved positions averaged once more over `half` poses on each side
-/// (a shift along a bend makes it tighter on the inside), where the average is free; then each
-/// stretch between turns on the spot laid out again `spacing_m` apart, with headings from the
-/// new positions. Poses that did not move (by [`UNMOVED_M`]) are kept as they were: the ends
-/// and turns on the spot (`ramp` is 0 there), rooms and halls.
+/// where the shift is at least [`SMOOTH_FULL_M`] (less of it where it is less), where the
+/// average is free; headings turned by as much as the moved neighbours turn the chord between
+/// them; a moved pose not ahead of the one before it left out; and poses put in where moved
+/// ones came too far apart. Poses whose neighbourhood did not move stay exactly as the search
+/// put them (the ends and turns on the spot, where `ramp` is 0, rooms and halls), and are
+/// flagged as such for [`violations`].
 #[allow(clippy::too_many_arguments)]
 fn reshaped(
     map: &PlanningMap,
