@@ -309,10 +309,7 @@ pub fn centre(
         if need.iter().all(|&v| v >= 1.0) {
             break;
         }
-        let step = moving_average(&moving_minimum(&need, half), half);
-        for (f, s) in factor.iter_mut().zip(&step) {
-            *f *= s;
-        }
+        retreat(&mut factor, &need, half, half);
     }
     // The moved positions are averaged (over half the shifts' length) and checked; where a
     // spot still breaks a rule, the shift round it is taken away (by the same smooth factor)
@@ -340,12 +337,18 @@ pub fn centre(
                 .unwrap_or(0);
             need[k] = 0.0;
         }
-        let step = moving_average(&moving_minimum(&need, 2 * half), half);
-        for (f, s) in factor.iter_mut().zip(&step) {
-            *f *= s;
-        }
+        retreat(&mut factor, &need, 2 * half, half);
     }
     poses.to_vec()
+}
+
+/// Scales `factor` down by what each pose `need`s, smoothly: the need's minimum over `erode`
+/// poses on each side, averaged over `half` (so never more than any pose in reach needs).
+fn retreat(factor: &mut [f64], need: &[f64], erode: usize, half: usize) {
+    let step = moving_average(&moving_minimum(need, erode), half);
+    for (f, s) in factor.iter_mut().zip(&step) {
+        *f *= s;
+    }
 }
 
 /// Rounds of [`centre`]'s local retreat before it keeps the original path.
@@ -473,26 +476,24 @@ fn reshaped(
     // between them, so that where nothing moved the pose stays exactly as the search put it
     // and an arc keeps its discretisation.
     let n = poses.len();
-    let chord = |pts: &dyn Fn(usize) -> (f64, f64), i: usize| {
-        let (a, b) = (pts(i - 1), pts(i + 1));
-        ((b.1 - a.1).atan2(b.0 - a.0), (b.0 - a.0).hypot(b.1 - a.1))
-    };
-    let original = |i: usize| (poses[i].x_m, poses[i].y_m);
-    let now = |i: usize| points[i];
+    let original: Vec<(f64, f64)> = poses.iter().map(|q| (q.x_m, q.y_m)).collect();
+    let moved_at: Vec<bool> = points
+        .iter()
+        .zip(&original)
+        .map(|(a, b)| (a.0 - b.0).hypot(a.1 - b.1) >= 1e-9)
+        .collect();
     let mut out: Vec<GridPose> = Vec::with_capacity(n);
     let mut verbatim: Vec<bool> = Vec::with_capacity(n);
     for i in 0..n {
-        let unmoved = i == 0
-            || i == n - 1
-            || [i - 1, i, i + 1]
-                .iter()
-                .all(|&k| (points[k].0 - poses[k].x_m).hypot(points[k].1 - poses[k].y_m) < 1e-9);
-        if unmoved {
+        if i == 0 || i == n - 1 || !moved_at[i - 1..=i + 1].contains(&true) {
             out.push(poses[i]);
             verbatim.push(true);
             continue;
         }
-        let ((was, was_m), (is, is_m)) = (chord(&original, i), chord(&now, i));
+        let ((was, was_m), (is, is_m)) = (
+            chord(original[i - 1], original[i + 1]),
+            chord(points[i - 1], points[i + 1]),
+        );
         let yaw_rad = if was_m > 1e-6 && is_m > 1e-6 {
             normalize_angle(poses[i].yaw_rad + normalize_angle(is - was))
         } else {
@@ -516,6 +517,11 @@ fn reshaped(
         verbatim.push(false);
     }
     densify(&out, &verbatim, spacing_m)
+}
+
+/// Direction and length of the chord from `a` to `b`.
+fn chord(a: (f64, f64), b: (f64, f64)) -> (f64, f64) {
+    ((b.1 - a.1).atan2(b.0 - a.0), (b.0 - a.0).hypot(b.1 - a.1))
 }
 
 fn step(a: GridPose, b: GridPose) -> f64 {
