@@ -218,6 +218,11 @@ pub struct TableArgs {
     /// (`[safety.recovery]`): the controller alone.
     #[arg(long)]
     no_recovery: bool,
+    /// Plans on the floor plan alone: the agent reports no obstacles its laser sees where the
+    /// plan is free (`[unmapped_obstacles]` off) and the planner routes round none
+    /// (`[seen_obstacles]` off), as in every table before 2026-11-27's fifteenth session.
+    #[arg(long)]
+    no_seen_obstacles: bool,
     /// Puts this scripted encounter (`person_ahead`, `person_oncoming`, `glass_door`,
     /// `robot_parked`, `furniture`, `open_glass_door`; as `eval record --encounters` draws them) on the path from
     /// each scenario's start to its first goal, named `<scenario>-<kind>`; scenarios where it
@@ -498,6 +503,9 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
     if args.no_recovery {
         agent.safety.recovery.enabled = false;
     }
+    if args.no_seen_obstacles {
+        agent.unmapped_obstacles.enabled = false;
+    }
     let models_dir = match &args.models {
         Some(dir) => dir.clone(),
         None => {
@@ -563,6 +571,7 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
             if args.no_centring {
                 intention.planner.centring.enabled = false;
             }
+            intention.seen.enabled = !args.no_seen_obstacles;
             intention.dlm.measure = dlm_measure_for(
                 args.dlm_measure,
                 methods

@@ -128,6 +128,7 @@ fn run(name: &str, scenario: Scenario, max_s: f64) -> Run {
             covariance: [0.0; 9],
             sensor_stamp_ns: obs.time_ns,
             map: map_ref.clone(),
+            unmapped_obstacles_m: Vec::new(),
         };
         let intention = match pipeline.answer(
             &estimate,

@@ -61,6 +61,7 @@ fn messages() -> Vec<LogMessage> {
         covariance: [0.01, 0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.0, 0.004],
         sensor_stamp_ns: 100_000_000,
         map: map_ref(),
+        unmapped_obstacles_m: Vec::new(),
     };
     vec![
         LogMessage::Map(MapInfo {

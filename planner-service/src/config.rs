@@ -15,7 +15,7 @@ use crate::fleet::FleetConfig;
 use crate::restart::{RestartPolicy, RestartPolicyError};
 use planning::intention::dlm::DlmParamsError;
 use planning::intention::{DlmParams, LpeParams};
-use planning::{AvoidParams, PlanError, PlannerConfig, ReuseParams};
+use planning::{AvoidParams, PlanError, PlannerConfig, ReuseParams, SeenObstacleParams};
 use protocol::{LpeParamsError, SessionArgs, SessionError, SessionMode, SiteId};
 
 /// The whole configuration file.
@@ -30,6 +30,9 @@ pub struct ServiceConfig {
     /// How plans keep clear of the fleet's other robots (`[other_robots]`; which robots:
     /// `[fleet] neighbour_radius_m`).
     pub other_robots: AvoidParams,
+    /// How plans keep clear of what the robots' lasers see where the floor plan is free
+    /// (`[seen_obstacles]`; the agents report it with their poses).
+    pub seen_obstacles: SeenObstacleParams,
     pub http: HttpConfig,
     pub zenoh: ZenohConfig,
     /// The fleet core (`[fleet]`): goal tolerance, timeouts of silent robots and paused tasks.
@@ -386,6 +389,7 @@ impl ServiceConfig {
             trail_poses: self.fleet.trail_poses,
             reuse: self.path_reuse.clone(),
             avoid: self.other_robots.clone(),
+            seen: self.seen_obstacles.clone(),
         }
     }
 
@@ -427,6 +431,7 @@ impl ServiceConfig {
         self.lpe.validate()?;
         self.path_reuse.validate()?;
         self.other_robots.validate()?;
+        self.seen_obstacles.validate()?;
         self.http.validate()?;
         self.zenoh.session_config()?;
         self.fleet.validate()?;

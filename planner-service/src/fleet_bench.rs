@@ -783,6 +783,7 @@ async fn publish_pose(
         covariance: [0.01, 0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.0, 0.003],
         sensor_stamp_ns: r.seq,
         map: map.clone(),
+        unmapped_obstacles_m: Vec::new(),
     };
     lock(received).sent.insert((index, r.seq), Instant::now());
     protocol::zenoh_io::publish(&r.publisher, &msg)

@@ -85,6 +85,7 @@ impl TestRobot {
             covariance: [0.01, 0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.0, 0.005],
             sensor_stamp_ns: self.seq * 1_000_000,
             map: self.map.clone(),
+            unmapped_obstacles_m: Vec::new(),
         };
         protocol::zenoh_io::put(
             &self.session,

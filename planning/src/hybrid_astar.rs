@@ -130,6 +130,8 @@ pub struct Planner {
     avoid: Vec<Disc>,
     /// The time budget of the plan under way, when not the configured one.
     budget_ms: Option<u64>,
+    /// The expansion budget of [`Self::plan_avoiding`], `None` otherwise.
+    expansions: Option<u64>,
 }
 
 impl Planner {
@@ -156,6 +158,7 @@ impl Planner {
             lattice: LatticeMap::default(),
             avoid: Vec::new(),
             budget_ms: None,
+            expansions: None,
         })
     }
 
@@ -235,7 +238,8 @@ impl Planner {
     }
 
     /// [`Self::plan`] keeping out of `discs` (map frame, e.g. other robots) as well as the
-    /// map's obstacles, within `budget_ms` instead of the configured budget. The obstacle
+    /// map's obstacles, within `budget_ms` and `max_expansions` instead of the configured
+    /// budgets (the smaller of the two expansion budgets counts). The obstacle
     /// heuristic still comes from the map alone (the discs only add cost, so it stays
     /// admissible); a disc that closes the way makes the search fail, by exhausting the
     /// reachable states or the budget.
@@ -248,6 +252,7 @@ impl Planner {
         goal: Pose2D,
         discs: &[Disc],
         budget_ms: u64,
+        max_expansions: u64,
     ) -> Result<Path, PlanError> {
         self.avoid = discs
             .iter()
@@ -261,9 +266,11 @@ impl Planner {
             })
             .collect();
         self.budget_ms = Some(budget_ms);
+        self.expansions = Some(max_expansions);
         let planned = self.plan_inner(start, goal);
         self.avoid.clear();
         self.budget_ms = None;
+        self.expansions = None;
         planned
     }
 
@@ -352,6 +359,9 @@ impl Planner {
         let w = self.config.heuristic_weight;
         let budget =
             std::time::Duration::from_millis(self.budget_ms.unwrap_or(self.config.time_budget_ms));
+        let max_expansions = self.expansions.map_or(self.config.max_expansions, |e| {
+            e.min(self.config.max_expansions)
+        });
         let rho = self.config.min_turning_radius_m;
         let goal_q = (goal.x_m, goal.y_m, goal.yaw_rad);
 
@@ -390,15 +400,15 @@ impl Planner {
                 let elapsed = t0.elapsed();
                 if elapsed > budget {
                     return Err(budget_error(
-                        format!("time budget {} ms", self.config.time_budget_ms),
+                        format!("time budget {} ms", budget.as_millis()),
                         elapsed,
                         expanded,
                     ));
                 }
             }
-            if expanded > self.config.max_expansions {
+            if expanded > max_expansions {
                 return Err(budget_error(
-                    format!("max_expansions {}", self.config.max_expansions),
+                    format!("max_expansions {max_expansions}"),
                     t0.elapsed(),
                     expanded,
                 ));

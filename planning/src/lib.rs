@@ -37,6 +37,7 @@ pub use hybrid_astar::Planner;
 pub use intention::{
     stop_intention, Answer, AvoidParams, DlmMeasure, DlmParams, IntentionConfig, IntentionPlanner,
     LpeImage, LpeParams, Neighbour, Planned, RefreshJob, Refreshed, ReuseParams,
+    SeenObstacleParams,
 };
 pub use map::{Disc, MapKey, PlanningMap};
 pub use path::{Path, PathStats};

@@ -726,3 +726,110 @@ fn a_robot_ahead_driving_away_is_followed_and_one_standing_is_gone_round() {
     assert_eq!(passed.avoided_robots, 1);
     assert!(off_centre_m(&passed) > 0.5, "{}", off_centre_m(&passed));
 }
+
+/// The face and sides of a cabinet standing out from the corridor's north wall (y = 6.4) to its
+/// centre line, at x = 11.6..12.4, as the agent's obstacle layer reports it: points 0.1 m apart.
+fn cabinet_points() -> Vec<[f64; 2]> {
+    let mut points = Vec::new();
+    for i in 0..=8 {
+        points.push([11.6 + 0.1 * f64::from(i), 5.2]);
+    }
+    for j in 1..=10 {
+        let y = 5.2 + 0.1 * f64::from(j);
+        points.push([11.6, y]);
+        points.push([12.4, y]);
+    }
+    points
+}
+
+fn closest_to_points_m(path: &[Pose2D], points: &[[f64; 2]]) -> f64 {
+    points
+        .iter()
+        .map(|&[x, y]| closest_m(path, Pose2D::new(x, y, 0.0)))
+        .fold(f64::INFINITY, f64::min)
+}
+
+#[test]
+fn a_plan_goes_round_an_obstacle_the_robot_reports_seeing_where_the_floor_plan_is_free() {
+    let goals = [Goal::at(25.5, 5.2)];
+    let progress = GoalProgress::new(&goals, 0);
+    // 4 m before it: within the planner's `range_m`.
+    let mut seeing = estimate(Pose2D::new(8.0, 5.2, 0.0), 1);
+    seeing.unmapped_obstacles_m = cabinet_points();
+
+    // Off (the paper's planner, the floor plan alone): straight through it.
+    let mut config = IntentionConfig::default();
+    config.seen.enabled = false;
+    let mut blind = IntentionPlanner::new(scenario_map("corridor", &config), config).unwrap();
+    let Answer::Heading {
+        plan: Ok(through), ..
+    } = blind.answer(&seeing, &progress, false)
+    else {
+        panic!("no plan on the floor plan");
+    };
+    assert!(closest_to_points_m(&through.path, &cabinet_points()) < 0.2);
+
+    let mut planner = corridor_planner();
+    let Answer::Heading {
+        plan: Ok(round), ..
+    } = planner.answer(&seeing, &progress, false)
+    else {
+        panic!("no plan round the cabinet");
+    };
+    let config = IntentionConfig::default();
+    let berth_m = config.seen.radius_m + config.planner.robot_radius_m;
+    let gap_m = closest_to_points_m(&round.path, &cabinet_points());
+    assert!(gap_m >= berth_m - 0.02, "{gap_m} m from the cabinet");
+    assert!(
+        round.length_m < through.length_m + 1.0,
+        "a detour, not a tour"
+    );
+    assert_eq!(round.avoided_robots, 0, "a cabinet is not a robot");
+
+    // The kept path holds while the cabinet is out of sight (no points reported); seen again,
+    // the answer keeps its berth (kept, or searched again where it passes within the berth
+    // and `kept_margin_m`); a new point on it sends it to a new search.
+    let mut next = estimate(along(&round.path, 0.05), 2);
+    let Answer::Heading { plan: Ok(kept), .. } = planner.answer(&next, &progress, false) else {
+        panic!("no plan");
+    };
+    assert!(kept.reused);
+    next = estimate(along(&round.path, 0.1), 3);
+    next.unmapped_obstacles_m = cabinet_points();
+    let Answer::Heading {
+        plan: Ok(again), ..
+    } = planner.answer(&next, &progress, false)
+    else {
+        panic!("no plan");
+    };
+    let gap_m = closest_to_points_m(&again.path, &cabinet_points());
+    assert!(gap_m >= berth_m - 0.02, "{gap_m} m from the cabinet");
+    let in_the_way = along(&round.path, 5.0);
+    let mut next = estimate(along(&round.path, 0.2), 5);
+    next.unmapped_obstacles_m = vec![[in_the_way.x_m, in_the_way.y_m]];
+    let Answer::Heading {
+        plan: Ok(moved), ..
+    } = planner.answer(&next, &progress, false)
+    else {
+        panic!("no plan");
+    };
+    assert!(!moved.reused);
+    assert!(closest_m(&moved.path, in_the_way) >= berth_m - 0.02);
+}
+
+#[test]
+fn obstacles_closing_the_corridor_leave_the_plan_on_the_floor_plan_within_the_expansion_budget() {
+    let goals = [Goal::at(25.5, 5.2)];
+    let progress = GoalProgress::new(&goals, 0);
+    let mut seeing = estimate(Pose2D::new(8.0, 5.2, 0.0), 1);
+    // A row of people standing across the corridor, as the laser sees their fronts.
+    seeing.unmapped_obstacles_m = (0..25).map(|i| [12.0, 4.0 + 0.1 * f64::from(i)]).collect();
+    let mut planner = corridor_planner();
+    let Answer::Heading {
+        plan: Ok(through), ..
+    } = planner.answer(&seeing, &progress, false)
+    else {
+        panic!("no plan");
+    };
+    assert!(closest_m(&through.path, Pose2D::new(12.0, 5.2, 0.0)) < 0.3);
+}

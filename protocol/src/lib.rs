@@ -88,10 +88,10 @@ pub use ids::{IdError, IdRejection, MapId, MapName, RobotId, SiteId, TaskId, Wor
 pub use keys::RobotTopic;
 pub use lpe::{LpeParams, LpeParamsError};
 pub use messages::{
-    normalize_angle, AgentState, AgentStatus, CameraFrame, CmdVel, ControllerKind, Dlm, Header,
-    Image, ImageEncoding, Intention, LaserScan, MapGrid, MapMeta, MapRef, Odometry, Pose2D,
-    PoseEstimate, PoseParseError, StopReason, TaskEvent, TaskState, UnknownController,
-    ValidationError, UNKNOWN_CELL,
+    normalize_angle, position_std_m, AgentState, AgentStatus, CameraFrame, CmdVel, ControllerKind,
+    Dlm, Header, Image, ImageEncoding, Intention, LaserScan, MapGrid, MapMeta, MapRef, Odometry,
+    Pose2D, PoseEstimate, PoseParseError, StopReason, TaskEvent, TaskState, UnknownController,
+    ValidationError, MAX_UNMAPPED_OBSTACLES, UNKNOWN_CELL,
 };
 pub use zenoh_io::{
     decode_sample, encoding_for, loopback_pair, peer_config, PublishError, SessionArgs,

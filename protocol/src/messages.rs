@@ -279,20 +279,36 @@ pub struct PoseEstimate {
     /// against it).
     pub sensor_stamp_ns: u64,
     pub map: MapRef,
+    /// Obstacles the robot's laser sees standing where the floor plan is free (a cabinet, a
+    /// parked robot), as map-frame points `[x_m, y_m]`, seen from this pose: the planner routes
+    /// round them as Nav2's global costmap routes round its obstacle layer. Empty when the agent
+    /// reports none (or is older than the field).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub unmapped_obstacles_m: Vec<[f64; 2]>,
 }
+
+/// Position uncertainty of a 3x3 row-major covariance over (x_m, y_m, yaw_rad): the square root
+/// of the largest eigenvalue of its xy block, the standard deviation along the worst direction.
+#[must_use]
+pub fn position_std_m(covariance: &[f64; 9]) -> f64 {
+    let c = covariance;
+    let (a, d) = (c[0], c[4]);
+    // Symmetrize: a covariance should be symmetric, but do not trust rounding of the sender.
+    let b = 0.5 * (c[1] + c[3]);
+    let mean = 0.5 * (a + d);
+    let half_diff = 0.5 * (a - d);
+    let max_eig = mean + half_diff.hypot(b);
+    max_eig.max(0.0).sqrt()
+}
+
+/// Most points one [`PoseEstimate`] may carry in `unmapped_obstacles_m`.
+pub const MAX_UNMAPPED_OBSTACLES: usize = 256;
 
 impl PoseEstimate {
     /// Position uncertainty: the square root of the largest eigenvalue of the xy covariance block,
     /// i.e. the standard deviation along the worst direction (conservative for "am I lost?").
     pub fn position_std_m(&self) -> f64 {
-        let c = &self.covariance;
-        let (a, d) = (c[0], c[4]);
-        // Symmetrize: a covariance should be symmetric, but do not trust rounding of the sender.
-        let b = 0.5 * (c[1] + c[3]);
-        let mean = 0.5 * (a + d);
-        let half_diff = 0.5 * (a - d);
-        let max_eig = mean + half_diff.hypot(b);
-        max_eig.max(0.0).sqrt()
+        position_std_m(&self.covariance)
     }
 
     /// Heading standard deviation: `sqrt(cov[yaw, yaw])`.
@@ -304,6 +320,18 @@ impl PoseEstimate {
         self.pose.validate("pose")?;
         for v in self.covariance {
             check_finite("covariance", v)?;
+        }
+        if self.unmapped_obstacles_m.len() > MAX_UNMAPPED_OBSTACLES {
+            return Err(ValidationError::new(
+                "unmapped_obstacles_m",
+                format!(
+                    "{} points, at most {MAX_UNMAPPED_OBSTACLES}",
+                    self.unmapped_obstacles_m.len()
+                ),
+            ));
+        }
+        for v in self.unmapped_obstacles_m.iter().flatten() {
+            check_finite("unmapped_obstacles_m", *v)?;
         }
         Ok(())
     }
@@ -907,6 +935,7 @@ mod tests {
                 name: MapName::new("m").unwrap(),
                 version: 1,
             },
+            unmapped_obstacles_m: Vec::new(),
         };
         assert!(close(p.position_std_m(), 0.2));
         assert!(close(p.yaw_std_rad(), 0.3));

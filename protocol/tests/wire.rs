@@ -70,6 +70,7 @@ fn pose() -> PoseEstimate {
         covariance: [0.0123, 0.001, 0.0, 0.001, 0.0234, 0.0, 0.0, 0.0, 0.0031],
         sensor_stamp_ns: 1_723_456_789_100_000_000,
         map: map_ref(),
+        unmapped_obstacles_m: Vec::new(),
     }
 }
 

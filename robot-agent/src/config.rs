@@ -11,6 +11,7 @@ use crate::amcl::{AmclConfig, AmclError};
 use crate::collision_monitor::CollisionMonitorConfig;
 use crate::controllers::{DynamicWindowConfig, PathTrackerConfig};
 use crate::recovery::RecoveryConfig;
+use crate::unmapped::UnmappedConfig;
 
 /// Velocity and acceleration limits of the base; network outputs in [-1, 1] scale by these.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -137,6 +138,8 @@ pub struct AgentConfig {
     pub path_tracker: PathTrackerConfig,
     pub dynamic_window: DynamicWindowConfig,
     pub intention_net: IntentionNetSettings,
+    /// What the laser sees where the floor plan is free, sent with each pose to the planner.
+    pub unmapped_obstacles: UnmappedConfig,
 }
 
 impl Default for AgentConfig {
@@ -157,6 +160,7 @@ impl Default for AgentConfig {
             path_tracker: PathTrackerConfig::default(),
             dynamic_window: DynamicWindowConfig::default(),
             intention_net: IntentionNetSettings::default(),
+            unmapped_obstacles: UnmappedConfig::default(),
         }
     }
 }
@@ -224,6 +228,7 @@ impl AgentConfig {
         }
         self.safety.collision_monitor.validate()?;
         self.safety.recovery.validate()?;
+        self.unmapped_obstacles.validate()?;
         if self.safety.intention_deadline_ms == 0 {
             return Err(ConfigError::Invalid {
                 field: "safety.intention_deadline_ms",

@@ -8,6 +8,8 @@
 //! - [`node`]: the agent node on Zenoh (localization, control and safety loop); [`cli`]: the
 //!   `robot-agent` command line around it.
 //! - [`replay`]: the agent's localization replayed over a recorded run log (`fleet-log`).
+//! - [`unmapped`]: the obstacle layer: what the laser sees where the floor plan is free, sent
+//!   with each pose so the planner routes round it.
 
 pub mod amcl;
 pub mod cli;
@@ -17,6 +19,7 @@ pub mod controllers;
 pub mod node;
 pub mod recovery;
 pub mod replay;
+pub mod unmapped;
 
 pub use amcl::{Amcl, AmclConfig, Estimate, LikelihoodField, UpdateOutcome};
 pub use collision_monitor::{CollisionMonitorConfig, Verdict};
@@ -24,3 +27,4 @@ pub use config::{AgentConfig, ControllerKind, Limits, Localization, Safety};
 pub use controllers::{Control, ControlInput, Controller, ControllerError};
 pub use node::{make_controller, NodeError, NodeOptions, Supervisor};
 pub use recovery::{Recovery, RecoveryConfig};
+pub use unmapped::{UnmappedConfig, UnmappedObstacles};

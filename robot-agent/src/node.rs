@@ -38,7 +38,7 @@ use protocol::{
 use zenoh::handlers::RingChannel;
 use zenoh::Session;
 
-use crate::amcl::{Amcl, AmclError, LikelihoodField, UpdateOutcome};
+use crate::amcl::{Amcl, AmclError, Estimate, LikelihoodField, UpdateOutcome};
 use crate::collision_monitor::{self, Verdict};
 use crate::config::{AgentConfig, ConfigError, ControllerKind, Limits};
 use crate::controllers::{
@@ -46,6 +46,7 @@ use crate::controllers::{
     IntentionNetOptions, PathTracker,
 };
 use crate::recovery::{Mode, Recovery};
+use crate::unmapped::UnmappedObstacles;
 
 /// Why the node could not start or had to stop.
 #[derive(Debug, thiserror::Error)]
@@ -210,6 +211,10 @@ pub struct Supervisor {
     /// off or the controller is the dynamic window itself).
     fallback: Option<Box<dyn Controller>>,
     recovery: Recovery,
+    /// What the laser sees where the floor plan is free (`None` when reporting is off).
+    unmapped: Option<UnmappedObstacles>,
+    /// What it reported with the last pose (map frame).
+    unmapped_seen: Vec<[f64; 2]>,
     /// What the collision monitor did to the last command.
     last_verdict: Option<Verdict>,
     /// Whether the fallback drove the last cycle.
@@ -277,6 +282,10 @@ impl Supervisor {
             None
         };
         let recovery = Recovery::new(config.safety.recovery);
+        let unmapped = config
+            .unmapped_obstacles
+            .enabled
+            .then(|| UnmappedObstacles::new(config.unmapped_obstacles));
         Ok(Self {
             config,
             map,
@@ -285,6 +294,8 @@ impl Supervisor {
             controller,
             fallback,
             recovery,
+            unmapped,
+            unmapped_seen: Vec::new(),
             last_verdict: None,
             recovering: false,
             odometry: VecDeque::with_capacity(ODOM_HISTORY),
@@ -332,16 +343,9 @@ impl Supervisor {
     /// Position standard deviation of the current belief (infinite before the first estimate).
     #[must_use]
     pub fn position_std_m(&self) -> f64 {
-        self.amcl.estimate().map_or(f64::INFINITY, |e| {
-            PoseEstimate {
-                header: Header::default(),
-                pose: e.pose,
-                covariance: e.covariance,
-                sensor_stamp_ns: 0,
-                map: self.map.clone(),
-            }
-            .position_std_m()
-        })
+        self.amcl
+            .estimate()
+            .map_or(f64::INFINITY, |e| protocol::position_std_m(&e.covariance))
     }
 
     #[must_use]
@@ -402,11 +406,13 @@ impl Supervisor {
         };
         self.last_amcl = Some(self.amcl.update(&odom, Some(&scan))?);
         let sensor_stamp_ns = scan.header.stamp_ns;
-        self.scan = Some(scan);
         let (Some(estimate), Some(pose)) = (self.amcl.estimate(), self.amcl.predict_pose(&odom))
         else {
+            self.scan = Some(scan);
             return Ok(None);
         };
+        self.unmapped_seen = self.mark_unmapped(&scan, &estimate, pose);
+        self.scan = Some(scan);
         self.pose_seq += 1;
         if self.poses.len() == POSE_HISTORY {
             self.poses.pop_front();
@@ -418,7 +424,35 @@ impl Supervisor {
             covariance: estimate.covariance,
             sensor_stamp_ns,
             map: self.map.clone(),
+            unmapped_obstacles_m: self.unmapped_seen.clone(),
         }))
+    }
+
+    /// Marks `scan`, taken at `estimate`, on the obstacle layer and returns what it reports
+    /// round `pose` (nothing when the layer is off; no marking while the estimate is too
+    /// doubtful to place a return).
+    fn mark_unmapped(
+        &mut self,
+        scan: &LaserScan,
+        estimate: &Estimate,
+        pose: Pose2D,
+    ) -> Vec<[f64; 2]> {
+        let Some(layer) = self.unmapped.as_mut() else {
+            return Vec::new();
+        };
+        let std_m = protocol::position_std_m(&estimate.covariance);
+        if std_m <= self.config.unmapped_obstacles.max_position_std_m {
+            let laser = self.config.amcl.robot_from_laser;
+            let (s, c) = estimate.pose.yaw_rad.sin_cos();
+            let map_from_laser = Pose2D::new(
+                estimate.pose.x_m + c * laser.x_m - s * laser.y_m,
+                estimate.pose.y_m + s * laser.x_m + c * laser.y_m,
+                estimate.pose.yaw_rad + laser.yaw_rad,
+            );
+            let field = self.amcl.field();
+            layer.on_scan(scan, map_from_laser, |x, y| field.distance_m(x, y));
+        }
+        layer.points_m(pose)
     }
 
     /// Takes an intention if it answers a pose this agent published on this map and is newer
@@ -624,7 +658,13 @@ impl Supervisor {
             .last()
             .map_or(f64::INFINITY, |g| g.distance_m(&pose));
         let mode = if self.fallback.is_some() {
-            self.recovery.drive(dt, pose, goal_m, self.last_verdict)
+            let unmapped_m = self
+                .unmapped_seen
+                .iter()
+                .map(|&[x, y]| (x - pose.x_m).hypot(y - pose.y_m))
+                .fold(f64::INFINITY, f64::min);
+            self.recovery
+                .drive(dt, pose, goal_m, self.last_verdict, unmapped_m)
         } else {
             Mode::Primary
         };

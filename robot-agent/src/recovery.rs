@@ -27,8 +27,17 @@
 //! [`RecoveryConfig::approach_stall_s`] is relieved too, and the dynamic window (which heads for a
 //! goal in sight) drives the rest of the way.
 //!
+//! A third trigger: stalled beside something the floor plan lacks. In a passage narrowed by a
+//! cabinet, LPE-Net drifted to within half a metre of the cabinet and stopped or turned on the
+//! spot without the monitor holding it (task C, 2026-11-27). Within
+//! [`RecoveryConfig::beside_m`] of an obstacle the agent's obstacle layer reports
+//! ([`crate::unmapped`]), a controller that keeps the robot within [`STILL_M`] of one spot for
+//! [`RecoveryConfig::beside_stall_s`] is relieved. The layer has no glass in it (the laser sees
+//! through glass), so a network standing before a glass door is still left alone.
+//!
 //! Plain data in (cycle length, pose, distance to the goal, what the monitor did to the last
-//! command), the mode out; the [`Supervisor`](crate::Supervisor) switches controllers by it.
+//! command, how far the nearest reported obstacle is), the mode out; the
+//! [`Supervisor`](crate::Supervisor) switches controllers by it.
 
 use protocol::Pose2D;
 
@@ -55,7 +64,17 @@ pub struct RecoveryConfig {
     pub approach_m: f64,
     /// ... a controller that brings the robot no closer for this long is relieved too.
     pub approach_stall_s: f64,
+    /// Within this distance (robot centre to point) of an obstacle the agent reports seeing
+    /// where the floor plan is free ([`crate::unmapped`]) ...
+    pub beside_m: f64,
+    /// ... a controller that keeps the robot within [`STILL_M`] of one spot for this long is
+    /// relieved too.
+    pub beside_stall_s: f64,
 }
+
+/// How far the robot must move from where it stood to count as moving on, for
+/// [`RecoveryConfig::beside_stall_s`].
+pub const STILL_M: f64 = 0.1;
 
 /// What counts as coming closer to the goal, for [`RecoveryConfig::approach_stall_s`].
 pub const APPROACH_PROGRESS_M: f64 = 0.1;
@@ -70,6 +89,8 @@ impl Default for RecoveryConfig {
             max_s: 12.0,
             approach_m: 1.0,
             approach_stall_s: 3.0,
+            beside_m: 0.8,
+            beside_stall_s: 3.0,
         }
     }
 }
@@ -87,6 +108,8 @@ impl RecoveryConfig {
             ("safety.recovery.max_s", self.max_s),
             ("safety.recovery.approach_m", self.approach_m),
             ("safety.recovery.approach_stall_s", self.approach_stall_s),
+            ("safety.recovery.beside_m", self.beside_m),
+            ("safety.recovery.beside_stall_s", self.beside_stall_s),
         ])
     }
 }
@@ -113,6 +136,8 @@ pub struct Recovery {
     recoveries: u32,
     /// The closest the robot has come to the goal, and when.
     approach: Option<(f64, f64)>,
+    /// Where the robot has stood (within [`STILL_M`]), and since when.
+    still: Option<(Pose2D, f64)>,
 }
 
 impl Recovery {
@@ -125,6 +150,7 @@ impl Recovery {
             fallback_since: None,
             recoveries: 0,
             approach: None,
+            still: None,
         }
     }
 
@@ -150,17 +176,20 @@ impl Recovery {
         self.held_s = 0.0;
         self.fallback_since = None;
         self.approach = None;
+        self.still = None;
     }
 
     /// One driving cycle of `dt_s` at `pose`, `goal_m` from the goal; `monitor` is what the
     /// collision monitor did to the previous cycle's command (`None`: nothing to check, or it is
-    /// off). Returns who drives this cycle.
+    /// off); `unmapped_m` is how far the nearest obstacle the agent sees where the floor plan
+    /// is free lies from the robot's centre (infinite: none). Returns who drives this cycle.
     pub fn drive(
         &mut self,
         dt_s: f64,
         pose: Pose2D,
         goal_m: f64,
         monitor: Option<Verdict>,
+        unmapped_m: f64,
     ) -> Mode {
         self.clock_s += dt_s;
         let now = self.clock_s;
@@ -173,6 +202,7 @@ impl Recovery {
                 self.fallback_since = None;
                 self.held_s = 0.0;
                 self.approach = None;
+                self.still = None;
                 return Mode::Primary;
             }
             return Mode::Fallback;
@@ -189,6 +219,18 @@ impl Recovery {
         });
         if short_of_goal {
             self.take_over(pose, now, "short of the goal");
+            return Mode::Fallback;
+        }
+        self.still = match self.still {
+            Some((at, since_s)) if pose.distance_m(&at) < STILL_M => Some((at, since_s)),
+            _ => Some((pose, now)),
+        };
+        let stalled_beside = unmapped_m <= c.beside_m
+            && self
+                .still
+                .is_some_and(|(_, since_s)| now - since_s >= c.beside_stall_s);
+        if stalled_beside {
+            self.take_over(pose, now, "stalled beside an obstacle the floor plan lacks");
             return Mode::Fallback;
         }
         let held = monitor.is_some_and(|m| m.limited() && m.v_mps.abs() < c.held_speed_mps);
@@ -208,6 +250,7 @@ impl Recovery {
         self.fallback_since = Some((pose, now));
         self.held_s = 0.0;
         self.approach = None;
+        self.still = None;
         self.recoveries += 1;
         tracing::debug!(
             x_m = pose.x_m,
@@ -238,9 +281,9 @@ mod tests {
 
     /// The cycles until the mode first changes from what the first cycle gives.
     fn until_switch(r: &mut Recovery, pose: Pose2D, held: Option<f64>) -> usize {
-        let first = r.drive(DT, pose, FAR_M, verdict(held));
+        let first = r.drive(DT, pose, FAR_M, verdict(held), f64::INFINITY);
         (1..1000)
-            .find(|_| r.drive(DT, pose, FAR_M, verdict(held)) != first)
+            .find(|_| r.drive(DT, pose, FAR_M, verdict(held), f64::INFINITY) != first)
             .expect("no switch within 100 s")
     }
 
@@ -255,10 +298,10 @@ mod tests {
         assert_eq!(r.recoveries(), 1);
         // The dynamic window drives until 1.5 m of headway ...
         let on = Pose2D::new(2.4, 2.0, 0.0);
-        assert_eq!(r.drive(DT, on, FAR_M, None), Mode::Fallback);
+        assert_eq!(r.drive(DT, on, FAR_M, None, f64::INFINITY), Mode::Fallback);
         // ... then the driving controller takes over again, the hold timed afresh.
         let away = Pose2D::new(2.6, 2.0, 0.0);
-        assert_eq!(r.drive(DT, away, FAR_M, None), Mode::Primary);
+        assert_eq!(r.drive(DT, away, FAR_M, None, f64::INFINITY), Mode::Primary);
         let n = until_switch(&mut r, away, Some(0.0));
         assert!((9..=11).contains(&n), "{n}");
         assert_eq!(r.recoveries(), 2);
@@ -271,11 +314,14 @@ mod tests {
         let mut r = Recovery::new(RecoveryConfig::default());
         let here = Pose2D::new(0.0, 0.0, 0.0);
         for _ in 0..600 {
-            assert_eq!(r.drive(DT, here, FAR_M, None), Mode::Primary);
+            assert_eq!(r.drive(DT, here, FAR_M, None, f64::INFINITY), Mode::Primary);
         }
         // Slowed, but still driving.
         for _ in 0..600 {
-            assert_eq!(r.drive(DT, here, FAR_M, verdict(Some(0.6))), Mode::Primary);
+            assert_eq!(
+                r.drive(DT, here, FAR_M, verdict(Some(0.6)), f64::INFINITY),
+                Mode::Primary
+            );
         }
         assert_eq!(r.recoveries(), 0);
     }
@@ -288,7 +334,7 @@ mod tests {
         for k in 0..600 {
             let held = (k % 2 == 0).then_some(0.0);
             assert_eq!(
-                r.drive(DT, here, FAR_M, verdict(held)),
+                r.drive(DT, here, FAR_M, verdict(held), f64::INFINITY),
                 Mode::Primary,
                 "cycle {k}"
             );
@@ -310,7 +356,10 @@ mod tests {
         r.idle(DT);
         assert_eq!(r.mode(), Mode::Primary);
         // After a stop the hold is timed afresh.
-        assert_eq!(r.drive(DT, here, FAR_M, verdict(Some(0.0))), Mode::Primary);
+        assert_eq!(
+            r.drive(DT, here, FAR_M, verdict(Some(0.0)), f64::INFINITY),
+            Mode::Primary
+        );
     }
 
     #[test]
@@ -320,27 +369,63 @@ mod tests {
         // Creeping towards the goal, 5 cm a second: coming closer, never relieved.
         for k in 0..200 {
             let goal_m = 0.9 - 0.005 * f64::from(k);
-            assert_eq!(r.drive(DT, here, goal_m, None), Mode::Primary, "cycle {k}");
+            assert_eq!(
+                r.drive(DT, here, goal_m, None, f64::INFINITY),
+                Mode::Primary,
+                "cycle {k}"
+            );
         }
         // Standing 0.8 m short: relieved after approach_stall_s ...
         let mut r = Recovery::new(RecoveryConfig::default());
         let n = (0..100)
-            .find(|_| r.drive(DT, here, 0.8, None) == Mode::Fallback)
+            .find(|_| r.drive(DT, here, 0.8, None, f64::INFINITY) == Mode::Fallback)
             .unwrap();
         assert!((29..=31).contains(&n), "{n}");
         assert_eq!(r.recoveries(), 1);
         // ... but not standing further out than approach_m, before a glass door.
         let mut r = Recovery::new(RecoveryConfig::default());
         for _ in 0..600 {
-            assert_eq!(r.drive(DT, here, 1.2, None), Mode::Primary);
+            assert_eq!(r.drive(DT, here, 1.2, None, f64::INFINITY), Mode::Primary);
         }
         // The next goal, once one is reached, is timed afresh.
         let mut r = Recovery::new(RecoveryConfig::default());
         for _ in 0..20 {
-            r.drive(DT, here, 0.3, None);
+            r.drive(DT, here, 0.3, None, f64::INFINITY);
         }
         for _ in 0..20 {
-            assert_eq!(r.drive(DT, here, 0.9, None), Mode::Primary);
+            assert_eq!(r.drive(DT, here, 0.9, None, f64::INFINITY), Mode::Primary);
+        }
+    }
+
+    #[test]
+    fn standing_beside_a_seen_obstacle_for_beside_stall_s_hands_over_but_not_before_glass() {
+        let mut r = Recovery::new(RecoveryConfig::default());
+        let here = Pose2D::new(0.0, 0.0, 0.0);
+        // Turning on the spot 0.5 m from a cabinet the floor plan lacks: relieved after 3 s.
+        let n = (0..100)
+            .find(|&k| {
+                let turning = Pose2D::new(0.01 * f64::from(k % 3), 0.0, 0.1 * f64::from(k));
+                r.drive(DT, turning, FAR_M, None, 0.5) == Mode::Fallback
+            })
+            .expect("never relieved");
+        assert!((29..=31).contains(&n), "{n}");
+        assert_eq!(r.recoveries(), 1);
+        // Standing before a glass door (nothing the laser sees near) is left alone, as is
+        // creeping on beside the cabinet.
+        let mut r = Recovery::new(RecoveryConfig::default());
+        for k in 0..100 {
+            assert_eq!(r.drive(DT, here, FAR_M, None, f64::INFINITY), Mode::Primary);
+            let creeping = Pose2D::new(0.05 * f64::from(k), 0.0, 0.0);
+            assert_eq!(
+                r.drive(DT, creeping, FAR_M, None, 0.5),
+                Mode::Primary,
+                "{k}"
+            );
+        }
+        // Farther than beside_m: left alone.
+        let mut r = Recovery::new(RecoveryConfig::default());
+        for _ in 0..100 {
+            assert_eq!(r.drive(DT, here, FAR_M, None, 1.0), Mode::Primary);
         }
     }
 
@@ -352,8 +437,11 @@ mod tests {
         });
         let here = Pose2D::new(0.0, 0.0, 0.0);
         for _ in 0..100 {
-            assert_eq!(r.drive(DT, here, FAR_M, verdict(Some(0.0))), Mode::Primary);
-            assert_eq!(r.drive(DT, here, 0.5, None), Mode::Primary);
+            assert_eq!(
+                r.drive(DT, here, FAR_M, verdict(Some(0.0)), f64::INFINITY),
+                Mode::Primary
+            );
+            assert_eq!(r.drive(DT, here, 0.5, None, 0.1), Mode::Primary);
         }
     }
 

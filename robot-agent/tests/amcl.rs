@@ -122,6 +122,7 @@ fn run_logged(
                             name: MapName::new("drive").unwrap(),
                             version: 1,
                         },
+                        unmapped_obstacles_m: Vec::new(),
                     })
                     .unwrap();
                 }

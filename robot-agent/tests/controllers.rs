@@ -570,6 +570,7 @@ fn drive_replanned(
             covariance: [0.0; 9],
             sensor_stamp_ns: header.stamp_ns,
             map: map_ref("depot"),
+            unmapped_obstacles_m: Vec::new(),
         };
         let it = match pipeline.answer(&estimate, &GoalProgress::new(&goals, 0), false) {
             Answer::Done => return (Some(t_s), closest_m),

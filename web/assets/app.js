@@ -1133,6 +1133,7 @@ function draw(now) {
     if (!robot.pose || !robot.map || robot.map.name !== state.mapName) continue;
     const color = robot.online ? colorOf(robot.id) : '#8a8f96';
     drawTrail(robot, color, now);
+    if (robot.online) drawUnmapped(robot.pose.unmapped_obstacles_m, ppm);
     if (robot.intention && robot.online) drawPath(robot.intention.path, color);
     const pos = worldToCanvas(robot.pose.x_m, robot.pose.y_m);
     drawRobot(robot, pos, color, ppm);
@@ -1171,6 +1172,21 @@ function drawTrail(robot, color, now) {
     ctx.stroke();
   }
   ctx.globalAlpha = 1;
+}
+
+// What a robot's laser sees where the floor plan is free (its plan keeps clear of it): dark
+// squares of the agent's 0.1 m marking cells.
+function drawUnmapped(points, ppm) {
+  if (!points || !points.length) return;
+  const side = Math.max(2, 0.1 * ppm);
+  ctx.save();
+  ctx.fillStyle = '#7a3b12';
+  ctx.globalAlpha = 0.8;
+  for (const [x, y] of points) {
+    const c = worldToCanvas(x, y);
+    ctx.fillRect(c.x - side / 2, c.y - side / 2, side, side);
+  }
+  ctx.restore();
 }
 
 function drawPath(path, color) {

@@ -103,13 +103,14 @@ impl Default for TableOptions {
     }
 }
 
-/// The service's default intention pipeline, with the planner's wall-clock budget lifted (its
-/// expansion budget still bounds every plan): a plan that ran out of time on a loaded machine
+/// The service's default intention pipeline, with the planner's wall-clock budgets lifted (the
+/// expansion budgets still bound every plan): a plan that ran out of time on a loaded machine
 /// would make a run depend on more than its seed.
 #[must_use]
 pub fn deterministic_intention_config() -> IntentionConfig {
     let mut config = IntentionConfig::default();
     config.planner.time_budget_ms = 60_000;
+    config.seen.budget_ms = 60_000;
     config
 }
 

@@ -115,6 +115,7 @@ mod tests {
                 name: MapName::new("depot").unwrap(),
                 version: 1,
             },
+            unmapped_obstacles_m: Vec::new(),
         }
     }
 

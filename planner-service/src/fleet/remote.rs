@@ -635,6 +635,7 @@ mod tests {
                     name: MapName::new("m").unwrap(),
                     version: 1,
                 },
+                unmapped_obstacles_m: Vec::new(),
             },
         };
         let back: CycleRequest = protocol::decode(&protocol::encode(&request).unwrap()).unwrap();

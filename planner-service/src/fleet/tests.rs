@@ -45,6 +45,7 @@ fn pose_on(map: &str, x: f64, y: f64) -> PoseEstimate {
             name: MapName::new(map).unwrap(),
             version: 1,
         },
+        unmapped_obstacles_m: Vec::new(),
     }
 }
 

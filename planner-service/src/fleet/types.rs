@@ -241,7 +241,7 @@ impl TaskFilter {
 }
 
 /// A robot's pose estimate as the dashboard shows it.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PoseView {
     pub x_m: f64,
     pub y_m: f64,
@@ -249,6 +249,10 @@ pub struct PoseView {
     /// 3x3 row-major covariance over (x_m, y_m, yaw_rad).
     pub covariance: [f64; 9],
     pub stamp_ns: u64,
+    /// What the robot's laser sees standing where the floor plan is free (map frame), which its
+    /// plan keeps clear of.
+    #[serde(default)]
+    pub unmapped_obstacles_m: Vec<[f64; 2]>,
 }
 
 impl From<&PoseEstimate> for PoseView {
@@ -259,6 +263,7 @@ impl From<&PoseEstimate> for PoseView {
             yaw_rad: p.pose.yaw_rad,
             covariance: p.covariance,
             stamp_ns: p.header.stamp_ns,
+            unmapped_obstacles_m: p.unmapped_obstacles_m.clone(),
         }
     }
 }

@@ -540,6 +540,7 @@ mod tests {
                     name: MapName::new("junctions").unwrap(),
                     version: 1,
                 },
+                unmapped_obstacles_m: Vec::new(),
             },
             received: Instant::now(),
         }

@@ -190,7 +190,12 @@ fn schemas() -> Value {
             "properties": {
                 "x_m": num, "y_m": num, "yaw_rad": num,
                 "covariance": { "type": "array", "items": num, "minItems": 9, "maxItems": 9, "description": "3x3 row-major over (x_m, y_m, yaw_rad)." },
-                "stamp_ns": uint
+                "stamp_ns": uint,
+                "unmapped_obstacles_m": {
+                    "type": "array", "maxItems": 256,
+                    "items": { "type": "array", "items": num, "minItems": 2, "maxItems": 2 },
+                    "description": "Map-frame points [x_m, y_m] the robot's laser sees standing where the floor plan is free; its plan keeps clear of them."
+                }
             }
         },
         "StopReason": {

@@ -5,6 +5,7 @@
 //! - [`pipeline`]: pose in, intention out: the one pipeline the service and the evaluation run.
 //! - [`reuse`]: when the previous plan answers instead of a new search.
 //! - [`avoid`]: plans that keep clear of the fleet's other robots.
+//! - [`seen`]: plans that keep clear of what the robot's laser sees and the floor plan lacks.
 //! - [`route`]: the floor plan's route to the goal, which the `route` DLM measures.
 
 pub mod avoid;
@@ -13,6 +14,7 @@ pub mod lpe;
 pub mod pipeline;
 pub mod reuse;
 pub mod route;
+pub mod seen;
 
 pub use avoid::{AvoidParams, Neighbour};
 pub use dlm::{dlm_from_path, dlm_on_map, next_dlm, next_dlm_along, DlmMeasure, DlmParams};
@@ -23,3 +25,4 @@ pub use pipeline::{
 };
 pub use reuse::{KeptPlan, KeptRest, ReuseParams};
 pub use route::floor_plan_route;
+pub use seen::SeenObstacleParams;

@@ -20,7 +20,8 @@ use crate::intention::avoid::{path_clear_of, AvoidParams, Neighbour};
 use crate::intention::dlm::{dlm_on_map, DlmParams};
 use crate::intention::lpe::{render_lpe, LpeImage, LpeParams};
 use crate::intention::reuse::{KeptPlan, ReuseParams};
-use crate::map::PlanningMap;
+use crate::intention::seen::SeenObstacleParams;
+use crate::map::{Disc, PlanningMap};
 use crate::path::Path;
 
 /// Everything the pipeline needs besides the map; the service fills it from its `[planner]`,
@@ -43,6 +44,10 @@ pub struct IntentionConfig {
     /// How plans keep clear of the fleet's other robots ([`IntentionPlanner::answer_among`]).
     #[serde(default)]
     pub avoid: AvoidParams,
+    /// How plans keep clear of the obstacles the robot reports seeing where the floor plan is
+    /// free ([`PoseEstimate::unmapped_obstacles_m`]).
+    #[serde(default)]
+    pub seen: SeenObstacleParams,
 }
 
 impl Default for IntentionConfig {
@@ -56,6 +61,7 @@ impl Default for IntentionConfig {
             trail_poses: 60,
             reuse: ReuseParams::default(),
             avoid: AvoidParams::default(),
+            seen: SeenObstacleParams::default(),
         }
     }
 }
@@ -187,6 +193,7 @@ impl IntentionPlanner {
         config.lpe.validate()?;
         config.reuse.validate()?;
         config.avoid.validate()?;
+        config.seen.validate()?;
         if !(config.goal_tolerance_m.is_finite() && config.goal_tolerance_m > 0.0) {
             return Err(PlanError::invalid_config(
                 "goal_tolerance_m",
@@ -357,7 +364,8 @@ impl IntentionPlanner {
     }
 
     /// [`Self::answer`] for a robot of a fleet, with the other robots near it (map frame, same
-    /// map): the plan keeps clear of them where it can ([`AvoidParams`]).
+    /// map): the plan keeps clear of them where it can ([`AvoidParams`]), as it does of the
+    /// obstacles the pose reports seeing ([`SeenObstacleParams`]).
     pub fn answer_among(
         &mut self,
         pose: &PoseEstimate,
@@ -382,7 +390,14 @@ impl IntentionPlanner {
                     .is_some_and(|g| g.yaw_rad.is_none());
                 Answer::Heading {
                     goal_index: index,
-                    plan: self.plan(robot, target, free_heading, render_lpe, others),
+                    plan: self.plan(
+                        robot,
+                        target,
+                        free_heading,
+                        render_lpe,
+                        others,
+                        &pose.unmapped_obstacles_m,
+                    ),
                 }
             }
         }
@@ -395,13 +410,17 @@ impl IntentionPlanner {
         free_heading: bool,
         render_lpe: bool,
         others: &[Neighbour],
+        seen_m: &[[f64; 2]],
     ) -> Result<Planned, PlanError> {
         // The caller did not take the search the last answer left due: it answers now.
         if let Refresh::Due(_) = self.refresh {
             self.drop_kept();
         }
         let own_radius_m = self.config.planner.robot_radius_m;
-        let (discs, near) = self.config.avoid.discs(others, robot, goal, own_radius_m);
+        let (mut discs, near) = self.config.avoid.discs(others, robot, goal, own_radius_m);
+        let robot_discs = discs.len();
+        discs.extend(self.config.seen.discs(seen_m, robot, goal, own_radius_m));
+        let seen = discs.len() > robot_discs;
         let kept_rest = self
             .kept
             .as_mut()
@@ -414,13 +433,25 @@ impl IntentionPlanner {
                     &self.config.reuse,
                 )
             })
-            // A kept path that another robot now stands on is searched again (round it).
-            .filter(|rest| path_clear_of(&rest.poses, &discs, own_radius_m));
+            // A kept path that another robot now stands on is searched again (round it), and so
+            // is one that passes a seen obstacle's berth by less than `kept_margin_m`: near what
+            // the laser sees, the path follows what it sees now (a person who stopped, a
+            // cabinet seen whole), as a new search every cycle would.
+            .filter(|rest| {
+                let (robots, seen) = discs.split_at(robot_discs);
+                path_clear_of(&rest.poses, robots, own_radius_m)
+                    && path_clear_of(
+                        &rest.poses,
+                        seen,
+                        own_radius_m + self.config.seen.kept_margin_m,
+                    )
+            });
         let reused = kept_rest.is_some();
         let (poses, length_m) = match kept_rest {
             Some(rest) => (rest.poses, rest.length_m),
             None => {
-                let (path, avoided) = self.search_among(robot, goal, free_heading, &discs, near)?;
+                let (path, avoided) =
+                    self.search_among(robot, goal, free_heading, &discs, near, seen)?;
                 self.kept_avoided = avoided;
                 self.generation += 1;
                 self.kept = self.config.reuse.enabled.then(|| {
@@ -470,16 +501,18 @@ impl IntentionPlanner {
         })
     }
 
-    /// A new search round `discs` (standing for `robots` other robots) when there are any and
-    /// the last such search did not fail within `retry_cycles`; else, or when it finds no
-    /// path, on the floor plan alone. Also how many robots the path keeps clear of.
+    /// A new search round `discs` (standing for `robots` other robots, and for seen obstacles
+    /// when `seen`) when there are any and the last such search did not fail within
+    /// `retry_cycles`; else, or when it finds no path, on the floor plan alone. Also how many
+    /// robots the path keeps clear of.
     fn search_among(
         &mut self,
         robot: Pose2D,
         goal: Pose2D,
         free_heading: bool,
-        discs: &[crate::map::Disc],
+        discs: &[Disc],
         robots: usize,
+        seen: bool,
     ) -> Result<(Path, usize), PlanError> {
         if !discs.is_empty() && self.avoid_paused == 0 {
             let planner = if free_heading {
@@ -487,7 +520,12 @@ impl IntentionPlanner {
             } else {
                 &mut self.fixed
             };
-            match planner.plan_avoiding(robot, goal, discs, self.config.avoid.budget_ms) {
+            let (budget_ms, max_expansions) = if seen {
+                (self.config.seen.budget_ms, self.config.seen.max_expansions)
+            } else {
+                (self.config.avoid.budget_ms, u64::MAX)
+            };
+            match planner.plan_avoiding(robot, goal, discs, budget_ms, max_expansions) {
                 Ok(path) => return Ok((path, robots)),
                 Err(_) => self.avoid_paused = self.config.avoid.retry_cycles,
             }

@@ -15,6 +15,7 @@ pub fn estimate(pose: Pose2D, seq: u64) -> PoseEstimate {
             name: MapName::new("depot").unwrap(),
             version: 1,
         },
+        unmapped_obstacles_m: Vec::new(),
     }
 }
 
