@@ -119,6 +119,11 @@ pub struct UnmappedObstacles {
     cells: HashMap<(i64, i64), Cell>,
 }
 
+/// The map-frame centre of cell (`ix`, `iy`) of side `cell_m`.
+fn centre((ix, iy): (i64, i64), cell_m: f64) -> (f64, f64) {
+    ((ix as f64 + 0.5) * cell_m, (iy as f64 + 0.5) * cell_m)
+}
+
 fn ns(s: f64) -> u64 {
     // Config values are validated positive and finite; the cast saturates beyond u64.
     (s * 1e9) as u64
@@ -131,11 +136,6 @@ impl UnmappedObstacles {
             config,
             cells: HashMap::new(),
         }
-    }
-
-    fn centre(&self, (ix, iy): (i64, i64)) -> (f64, f64) {
-        let c = self.config.cell_m;
-        ((ix as f64 + 0.5) * c, (iy as f64 + 0.5) * c)
     }
 
     /// Takes one scan taken at `map_from_laser` (the robot's pose composed with the laser's
@@ -198,23 +198,21 @@ impl UnmappedObstacles {
         let first_rad = f64::from(scan.angle_min_rad);
         let step_rad = f64::from(scan.angle_increment_rad);
         let range_max_m = f64::from(scan.range_max_m);
-        let centres: Vec<((i64, i64), (f64, f64))> =
-            self.cells.keys().map(|&k| (k, self.centre(k))).collect();
-        for (key, (x_m, y_m)) in centres {
+        let cell_m = self.config.cell_m;
+        self.cells.retain(|&key, _| {
+            let (x_m, y_m) = centre(key, cell_m);
             let (dx, dy) = (x_m - map_from_laser.x_m, y_m - map_from_laser.y_m);
             let (lx, ly) = (cos * dx + sin * dy, -sin * dx + cos * dy);
             let range_m = lx.hypot(ly);
             let beam = ((ly.atan2(lx) - first_rad) / step_rad).round();
             if beam < 0.0 || beam >= n as f64 || range_m + margin_m >= range_max_m {
-                continue;
+                return true;
             }
             let i = beam as usize;
             let beam_m = f64::from(scan.ranges_m[i]);
             let through = !scan.is_return(i) || beam_m > range_m + margin_m;
-            if through && beam_m >= f64::from(scan.range_min_m) {
-                self.cells.remove(&key);
-            }
-        }
+            !(through && beam_m >= f64::from(scan.range_min_m))
+        });
     }
 
     /// The confirmed cells' centres (map frame) within `report_range_m` of `robot`, nearest
@@ -226,12 +224,18 @@ impl UnmappedObstacles {
             .iter()
             .filter(|(_, cell)| cell.confirmed)
             .map(|(&k, _)| {
-                let (x_m, y_m) = self.centre(k);
+                let (x_m, y_m) = centre(k, self.config.cell_m);
                 ((x_m - robot.x_m).hypot(y_m - robot.y_m), [x_m, y_m])
             })
             .filter(|(d, _)| *d <= self.config.report_range_m)
             .collect();
-        near.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1[0].total_cmp(&b.1[0])));
+        // Cells are kept in a hash map: a full order makes the nearest `max_points` the same
+        // whatever its iteration order.
+        near.sort_by(|a, b| {
+            a.0.total_cmp(&b.0)
+                .then(a.1[0].total_cmp(&b.1[0]))
+                .then(a.1[1].total_cmp(&b.1[1]))
+        });
         near.truncate(self.config.max_points);
         near.into_iter().map(|(_, p)| p).collect()
     }
