@@ -218,6 +218,16 @@ pub struct TableArgs {
     /// (`[safety.recovery]`): the controller alone.
     #[arg(long)]
     no_recovery: bool,
+    /// Lets the controller turn the robot round itself when its path starts behind it, without
+    /// the agent's rotation shim (`[rotation_shim]`): the controller alone, as in the paper and
+    /// in every table before 2026-11-27's sixteenth session.
+    #[arg(long)]
+    no_rotation_shim: bool,
+    /// Lets the robot drive into a narrow passage whoever comes through it the other way,
+    /// without the agent's give-way rule (`[give_way]`), as in every table before 2026-11-27's
+    /// sixteenth session.
+    #[arg(long)]
+    no_give_way: bool,
     /// Plans on the floor plan alone: the agent reports no obstacles its laser sees where the
     /// plan is free (`[unmapped_obstacles]` off) and the planner routes round none
     /// (`[seen_obstacles]` off), as in every table before 2026-11-27's fifteenth session.
@@ -502,6 +512,12 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
     }
     if args.no_recovery {
         agent.safety.recovery.enabled = false;
+    }
+    if args.no_rotation_shim {
+        agent.rotation_shim.enabled = false;
+    }
+    if args.no_give_way {
+        agent.give_way.enabled = false;
     }
     if args.no_seen_obstacles {
         agent.unmapped_obstacles.enabled = false;

@@ -10,7 +10,9 @@ use protocol::{MapName, Pose2D, SiteId};
 use crate::amcl::{AmclConfig, AmclError};
 use crate::collision_monitor::CollisionMonitorConfig;
 use crate::controllers::{DynamicWindowConfig, PathTrackerConfig};
+use crate::give_way::GiveWayConfig;
 use crate::recovery::RecoveryConfig;
+use crate::rotation_shim::RotationShimConfig;
 use crate::unmapped::UnmappedConfig;
 
 /// Velocity and acceleration limits of the base; network outputs in [-1, 1] scale by these.
@@ -140,6 +142,10 @@ pub struct AgentConfig {
     pub intention_net: IntentionNetSettings,
     /// What the laser sees where the floor plan is free, sent with each pose to the planner.
     pub unmapped_obstacles: UnmappedConfig,
+    /// A turn on the spot towards the path before the driving controller drives on.
+    pub rotation_shim: RotationShimConfig,
+    /// Waiting short of a narrow passage while someone comes through it.
+    pub give_way: GiveWayConfig,
 }
 
 impl Default for AgentConfig {
@@ -161,6 +167,8 @@ impl Default for AgentConfig {
             dynamic_window: DynamicWindowConfig::default(),
             intention_net: IntentionNetSettings::default(),
             unmapped_obstacles: UnmappedConfig::default(),
+            rotation_shim: RotationShimConfig::default(),
+            give_way: GiveWayConfig::default(),
         }
     }
 }
@@ -229,6 +237,8 @@ impl AgentConfig {
         self.safety.collision_monitor.validate()?;
         self.safety.recovery.validate()?;
         self.unmapped_obstacles.validate()?;
+        self.rotation_shim.validate()?;
+        self.give_way.validate()?;
         if self.safety.intention_deadline_ms == 0 {
             return Err(ConfigError::Invalid {
                 field: "safety.intention_deadline_ms",

@@ -45,7 +45,9 @@ use crate::controllers::{
     Control, ControlInput, Controller, DynamicWindow, IntentionNet, IntentionNetError,
     IntentionNetOptions, PathTracker,
 };
+use crate::give_way::{GiveWay, Hold};
 use crate::recovery::{Mode, Recovery};
+use crate::rotation_shim::RotationShim;
 use crate::unmapped::UnmappedObstacles;
 
 /// Why the node could not start or had to stop.
@@ -196,6 +198,12 @@ pub struct Decision {
     /// The dynamic window drove this cycle in place of the configured controller, which the
     /// collision monitor had held in front of an obstacle ([`crate::recovery`]).
     pub recovering: bool,
+    /// The rotation shim turned the robot towards its path this cycle
+    /// ([`crate::rotation_shim`]).
+    pub rotating: bool,
+    /// The robot waits short of a narrow passage for someone coming through it
+    /// ([`crate::give_way`]).
+    pub giving_way: bool,
 }
 
 /// The agent's brain without I/O: localization, the newest inputs, the controller and the
@@ -211,6 +219,12 @@ pub struct Supervisor {
     /// off or the controller is the dynamic window itself).
     fallback: Option<Box<dyn Controller>>,
     recovery: Recovery,
+    /// Turns the robot towards its path before the controller drives on (none when off or the
+    /// controller is the dynamic window or the expert, which turn round by themselves).
+    shim: Option<RotationShim>,
+    /// Waits short of a narrow passage while someone comes through (none when off, or for the
+    /// expert, which gives way by its own rule).
+    give_way: Option<GiveWay>,
     /// What the laser sees where the floor plan is free (`None` when reporting is off).
     unmapped: Option<UnmappedObstacles>,
     /// What it reported with the last pose (map frame).
@@ -282,6 +296,10 @@ impl Supervisor {
             None
         };
         let recovery = Recovery::new(config.safety.recovery);
+        let shim = (config.rotation_shim.enabled && relieved)
+            .then(|| RotationShim::new(config.rotation_shim));
+        let give_way = (config.give_way.enabled && controller.kind() != ControllerKind::Expert)
+            .then(|| GiveWay::new(config.give_way));
         let unmapped = config
             .unmapped_obstacles
             .enabled
@@ -294,6 +312,8 @@ impl Supervisor {
             controller,
             fallback,
             recovery,
+            shim,
+            give_way,
             unmapped,
             unmapped_seen: Vec::new(),
             last_verdict: None,
@@ -553,6 +573,10 @@ impl Supervisor {
             }
         }
         let recovering = self.recovering && state == AgentState::Driving;
+        let rotating =
+            state == AgentState::Driving && self.shim.as_ref().is_some_and(RotationShim::turning);
+        let giving_way =
+            state == AgentState::Driving && self.give_way.as_ref().is_some_and(GiveWay::waiting);
         self.cmd_v_mps = v;
         self.cmd_omega_radps = w;
         self.state = state;
@@ -564,6 +588,8 @@ impl Supervisor {
             stop_reason: reason,
             collision_monitor: self.monitor,
             recovering,
+            rotating,
+            giving_way,
         }
     }
 
@@ -571,6 +597,12 @@ impl Supervisor {
         self.controller.reset();
         if let Some(f) = &mut self.fallback {
             f.reset();
+        }
+        if let Some(shim) = &mut self.shim {
+            shim.reset();
+        }
+        if let Some(g) = &mut self.give_way {
+            g.reset();
         }
         self.recovering = false;
     }
@@ -657,7 +689,36 @@ impl Supervisor {
             .path
             .last()
             .map_or(f64::INFINITY, |g| g.distance_m(&pose));
-        let mode = if self.fallback.is_some() {
+        let held = match (self.give_way.as_mut(), self.scan.as_ref()) {
+            (Some(give_way), Some(scan)) => give_way_hold(
+                give_way,
+                GiveWayInputs {
+                    scan,
+                    field: self.amcl.field(),
+                    seen_m: &self.unmapped_seen,
+                    cell_m: self.config.unmapped_obstacles.cell_m,
+                    robot_from_laser: self.config.amcl.robot_from_laser,
+                },
+                dt,
+                pose,
+                &intention.path,
+            ),
+            _ => None,
+        };
+        if let Some(spot) = held.and_then(|h| h.wait_at_m) {
+            self.recovery.idle(dt);
+            if let Some(shim) = &mut self.shim {
+                shim.reset();
+            }
+            let command = to_wait_spot(pose, spot, limits);
+            return (Some(command), AgentState::Driving, None);
+        }
+        let hold = held.map(|h| h.max_speed_mps);
+        let mode = if hold.is_some() {
+            // Waiting for someone on purpose is not being stuck.
+            self.recovery.idle(dt);
+            Mode::Primary
+        } else if self.fallback.is_some() {
             let unmapped_m = self
                 .unmapped_seen
                 .iter()
@@ -678,10 +739,26 @@ impl Supervisor {
             controller.reset();
             self.recovering = recovering;
         }
+        if let Some(shim) = self.shim.as_mut() {
+            let was_turning = shim.turning();
+            let turn = if recovering {
+                shim.reset();
+                None
+            } else {
+                shim.command(pose, input.v_mps, &intention.path, limits.max_turn_radps)
+            };
+            if turn.is_some() {
+                return (turn.map(|c| capped(c, hold)), AgentState::Driving, None);
+            }
+            if was_turning {
+                // The controller takes the robot on from where the turn left it.
+                controller.reset();
+            }
+        }
         match controller.control(&input) {
             Ok(control) => {
-                let (v, w) = Control::clamped(control).to_physical(limits);
-                (Some((v, w)), AgentState::Driving, None)
+                let command = Control::clamped(control).to_physical(limits);
+                (Some(capped(command, hold)), AgentState::Driving, None)
             }
             Err(e) => stop(StopReason::ControllerError {
                 message: e.to_string(),
@@ -703,6 +780,90 @@ impl Supervisor {
             localized: self.localized(),
             recovering: self.recovering,
         }
+    }
+}
+
+/// What the give-way rule looks at besides the pose and the path.
+struct GiveWayInputs<'a> {
+    scan: &'a LaserScan,
+    field: &'a LikelihoodField,
+    /// The obstacle layer's confirmed cells (map frame).
+    seen_m: &'a [[f64; 2]],
+    cell_m: f64,
+    robot_from_laser: Pose2D,
+}
+
+/// The give-way rule's speed cap this cycle at `pose` on `path`: the laser's returns off the
+/// floor plan and off the obstacle layer's confirmed cells are the movers.
+fn give_way_hold(
+    give_way: &mut GiveWay,
+    inputs: GiveWayInputs<'_>,
+    dt: f64,
+    pose: Pose2D,
+    path: &[Pose2D],
+) -> Option<Hold> {
+    let GiveWayInputs {
+        scan,
+        field,
+        seen_m,
+        cell_m,
+        robot_from_laser: laser,
+    } = inputs;
+    let seen_gap_m = |x: f64, y: f64| {
+        seen_m
+            .iter()
+            .map(|&[sx, sy]| (sx - x).hypot(sy - y) - 0.5 * cell_m)
+            .fold(f64::INFINITY, f64::min)
+    };
+    let (s, c) = pose.yaw_rad.sin_cos();
+    let origin = (
+        pose.x_m + c * laser.x_m - s * laser.y_m,
+        pose.y_m + s * laser.x_m + c * laser.y_m,
+    );
+    let (ls, lc) = (pose.yaw_rad + laser.yaw_rad).sin_cos();
+    let movers: Vec<[f64; 2]> = (0..scan.ranges_m.len())
+        .filter(|&i| scan.is_return(i))
+        .filter_map(|i| {
+            let r = f64::from(scan.ranges_m[i]);
+            let (bs, bc) = f64::from(scan.beam_angle_rad(i)).sin_cos();
+            let (lx, ly) = (r * bc, r * bs);
+            let (x, y) = (origin.0 + lc * lx - ls * ly, origin.1 + ls * lx + lc * ly);
+            (give_way.off_the_plan(field.distance_m(x, y), seen_gap_m(x, y))).then_some([x, y])
+        })
+        .collect();
+    let free_m = |x: f64, y: f64| field.distance_m(x, y).min(seen_gap_m(x, y));
+    give_way.cycle(dt, pose, path, &movers, free_m)
+}
+
+/// Arrived within this of the waiting spot beside the path.
+const WAIT_SPOT_REACHED_M: f64 = 0.1;
+/// Top speed on the way to the waiting spot.
+const WAIT_SPOT_SPEED_MPS: f64 = 0.3;
+
+/// The command (v, ω) that takes the robot from `pose` to the waiting spot `spot` beside its
+/// path, turning on the spot first where it faces well away from it, and stands there.
+fn to_wait_spot(pose: Pose2D, spot: (f64, f64), limits: &Limits) -> (f64, f64) {
+    let (dx, dy) = (spot.0 - pose.x_m, spot.1 - pose.y_m);
+    let d = dx.hypot(dy);
+    if d <= WAIT_SPOT_REACHED_M {
+        return (0.0, 0.0);
+    }
+    let error = (dy.atan2(dx) - pose.yaw_rad + std::f64::consts::PI)
+        .rem_euclid(std::f64::consts::TAU)
+        - std::f64::consts::PI;
+    let w = (1.5 * error).clamp(-limits.max_turn_radps, limits.max_turn_radps);
+    if error.abs() > 0.6 {
+        return (0.0, w);
+    }
+    let v = (0.8 * d).min(WAIT_SPOT_SPEED_MPS).min(limits.max_speed_mps);
+    (v, w)
+}
+
+/// `command` (v, ω) with its forward speed capped at `max_speed_mps`, on the same arc.
+fn capped((v, w): (f64, f64), max_speed_mps: Option<f64>) -> (f64, f64) {
+    match max_speed_mps {
+        Some(cap) if v > cap => (cap, if v > 0.0 { w * cap / v } else { w }),
+        _ => (v, w),
     }
 }
 

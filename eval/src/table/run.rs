@@ -659,6 +659,9 @@ pub fn run_with(
             state = ?decision.state, goal_index, remaining,
             monitor_scale = decision.collision_monitor.map(|m| m.scale),
             recovering = decision.recovering,
+            rotating = decision.rotating,
+            giving_way = decision.giving_way,
+            people = ?world.people.iter().map(|p| (p.x_m, p.y_m)).collect::<Vec<_>>(),
             "cycle"
         );
         cmd = Command {

@@ -1,0 +1,694 @@
+//! Giving way: the robot waits before a passage too narrow to meet in while someone comes
+//! through it the other way.
+//!
+//! A cabinet narrows task C's corridor to 1.1 m, and a person walks that corridor. Met inside
+//! the gap, neither can step aside: the person stands, the collision monitor holds the robot,
+//! the obstacle layer confirms the standing person and no way is left (15 of LPE-Net's 39
+//! interventions in 20 runs of tasks A–E, 2026-11-27). People give way at such a place: the one
+//! who arrives second waits short of it. The privileged expert does so reading the simulator's
+//! truth (`eval::expert`); this is the same rule on what the robot itself sees.
+//!
+//! - **Someone coming:** the laser returns that lie neither on the floor plan's walls nor on the
+//!   obstacle layer's confirmed cells ([`crate::unmapped`]) are movers. Of those within
+//!   `lane_m` of the path ahead (up to `look_m`), the group nearest along the path is tracked
+//!   from cycle to cycle; its velocity along the path says whether it comes towards the robot
+//!   (faster than `oncoming_mps`).
+//! - **A narrow passage between:** the width across the path (to walls and confirmed cells,
+//!   both sides) below `narrow_width_m` somewhere between the robot and them.
+//! - **Wait short of it:** the speed is capped so that the robot stops `hold_back_m` before the
+//!   passage (far enough for them to come out of it and step round the robot), unless the
+//!   robot is within `committed_m` of it or in it already (better to go on through). It waits
+//!   while they keep coming, and `release_s` after.
+//!
+//! Plain data in (pose, path, movers, a free-space function), a speed cap out; the
+//! [`Supervisor`](crate::Supervisor) caps whichever controller drives.
+
+use std::collections::{HashSet, VecDeque};
+
+use protocol::Pose2D;
+
+use crate::config::ConfigError;
+use crate::controllers::path_tracker::{check_non_negative, check_positive};
+
+/// The `[give_way]` table.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GiveWayConfig {
+    /// Off: the robot drives into a narrow passage whoever comes the other way.
+    pub enabled: bool,
+    /// How far along the path movers and narrow passages are looked for.
+    pub look_m: f64,
+    /// A mover this close to the path (centre line to return) is in the robot's lane.
+    pub lane_m: f64,
+    /// A mover coming towards the robot along the path faster than this is coming through.
+    pub oncoming_mps: f64,
+    /// A passage narrower than this (across the path, wall to wall) is too narrow to meet in.
+    pub narrow_width_m: f64,
+    /// The robot waits this far before the passage ...
+    pub hold_back_m: f64,
+    /// ... and this far to the side of the path, room allowing (0: on the path).
+    pub step_aside_m: f64,
+    /// The robot's radius, and the room it keeps to walls when it steps aside.
+    pub robot_radius_m: f64,
+    pub wall_margin_m: f64,
+    /// A passage that starts closer than this has been entered: go on through.
+    pub committed_m: f64,
+    /// Deceleration to the waiting point.
+    pub brake_mps2: f64,
+    /// The robot waits this long after the last sight of someone coming.
+    pub release_s: f64,
+    /// A laser return at least this far from the floor plan's walls is not a wall.
+    pub min_map_gap_m: f64,
+}
+
+impl Default for GiveWayConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            look_m: 4.0,
+            lane_m: 0.6,
+            oncoming_mps: 0.15,
+            narrow_width_m: 1.3,
+            hold_back_m: 1.0,
+            step_aside_m: 0.8,
+            robot_radius_m: 0.25,
+            wall_margin_m: 0.15,
+            committed_m: 0.3,
+            brake_mps2: 0.5,
+            release_s: 1.0,
+            min_map_gap_m: 0.3,
+        }
+    }
+}
+
+impl GiveWayConfig {
+    /// Checks ranges that serde cannot express.
+    ///
+    /// # Errors
+    /// [`ConfigError::Invalid`] naming the first bad field and its value.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        check_positive(&[
+            ("give_way.look_m", self.look_m),
+            ("give_way.lane_m", self.lane_m),
+            ("give_way.oncoming_mps", self.oncoming_mps),
+            ("give_way.narrow_width_m", self.narrow_width_m),
+            ("give_way.hold_back_m", self.hold_back_m),
+            ("give_way.robot_radius_m", self.robot_radius_m),
+            ("give_way.committed_m", self.committed_m),
+            ("give_way.brake_mps2", self.brake_mps2),
+            ("give_way.release_s", self.release_s),
+            ("give_way.min_map_gap_m", self.min_map_gap_m),
+        ])?;
+        check_non_negative(&[
+            ("give_way.step_aside_m", self.step_aside_m),
+            ("give_way.wall_margin_m", self.wall_margin_m),
+        ])
+    }
+}
+
+/// Spacing of the width checks along the path, and of the steps across it.
+const STEP_M: f64 = 0.05;
+/// Returns within this of the group's nearest one belong to the same mover.
+const GROUP_M: f64 = 0.5;
+/// The returns are a mover's near side; its body reaches this much further.
+const BODY_M: f64 = 0.5;
+/// A group this close to where the tracked one was expected is the same mover.
+const ASSOCIATE_M: f64 = 0.4;
+/// Weight of the newest velocity measurement in the tracked velocity.
+const VELOCITY_GAIN: f64 = 0.3;
+/// A track younger than this has no velocity to judge by.
+const MIN_TRACK_S: f64 = 0.5;
+/// Free space across the path is measured this far from an obstacle's edge.
+const FREE_M: f64 = 0.05;
+/// Cycles of candidate returns remembered ...
+const HISTORY: usize = 20;
+/// ... of which those at least this many cycles old say what stands still.
+const STILL_FROM: usize = 10;
+/// Side of the cells the history is kept in.
+const HISTORY_CELL_M: f64 = 0.1;
+/// A mover's returns lie at least this far from the obstacle layer's confirmed cells.
+const MOVER_SEEN_GAP_M: f64 = 0.2;
+/// A mover further than this from the path's centre line comes along one side of it.
+const SIDE_M: f64 = 0.15;
+/// A step aside shorter than this is not worth making.
+const MIN_STEP_ASIDE_M: f64 = 0.2;
+/// How far along the path the robot's nearest point is looked for.
+const NEAREST_WINDOW_M: f64 = 1.5;
+
+/// The mover followed from cycle to cycle.
+#[derive(Debug, Clone, Copy)]
+struct Track {
+    x_m: f64,
+    y_m: f64,
+    vx_mps: f64,
+    vy_mps: f64,
+    age_s: f64,
+}
+
+/// Why the robot waits, and where.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Hold {
+    /// The speed cap this cycle.
+    pub max_speed_mps: f64,
+    /// Where to wait (map frame): beside the path short of the passage, off the mover's line,
+    /// so that they can come by without having to step round the robot; `None` where there is
+    /// no room beside the path (the robot then waits on it). Once they are by, the planner's
+    /// next path starts from where the robot stands.
+    pub wait_at_m: Option<(f64, f64)>,
+    /// Where the narrow passage starts, along the path from the robot.
+    pub narrow_from_m: f64,
+    /// How far along the path the mover is.
+    pub mover_m: f64,
+}
+
+/// The give-way state: the tracked mover and the wait.
+#[derive(Debug, Clone, Default)]
+pub struct GiveWay {
+    config: GiveWayConfig,
+    track: Option<Track>,
+    clock_s: f64,
+    /// The last cycle the robot was held, while it counts as waiting.
+    waiting: Option<f64>,
+    /// The last cycle someone was seen coming through while waiting.
+    last_seen_s: f64,
+    /// Where this wait takes place (chosen when it starts).
+    wait_at_m: Option<(f64, f64)>,
+    /// The cells of the last cycles' candidate returns, newest last.
+    history: VecDeque<HashSet<(i64, i64)>>,
+    waits: u32,
+}
+
+impl GiveWay {
+    #[must_use]
+    pub fn new(config: GiveWayConfig) -> Self {
+        Self {
+            config,
+            ..Self::default()
+        }
+    }
+
+    /// How many times the robot waited for someone.
+    #[must_use]
+    pub fn waits(&self) -> u32 {
+        self.waits
+    }
+
+    /// Whether the robot waits now.
+    #[must_use]
+    pub fn waiting(&self) -> bool {
+        self.waiting.is_some()
+    }
+
+    /// Forgets the mover and the wait (a stop, an intervention).
+    pub fn reset(&mut self) {
+        self.track = None;
+        self.waiting = None;
+        self.wait_at_m = None;
+        self.history.clear();
+    }
+
+    /// Whether a laser return could be a mover: `map_gap_m` from the floor plan's nearest wall
+    /// and `seen_gap_m` from the obstacle layer's nearest confirmed cell. Returns on a
+    /// cabinet's faces that the layer has not confirmed yet (seen edge-on, a beam now and then)
+    /// lie next to ones it has; someone walking by keeps their body's width off anything.
+    #[must_use]
+    pub fn off_the_plan(&self, map_gap_m: f64, seen_gap_m: f64) -> bool {
+        map_gap_m >= self.config.min_map_gap_m && seen_gap_m >= MOVER_SEEN_GAP_M
+    }
+
+    /// One cycle of `dt_s`: the speed cap while the robot must wait, `None` when it may drive.
+    /// `movers_m` are this cycle's laser returns off the floor plan and off the obstacle
+    /// layer's confirmed cells (map frame); `free_m(x, y)` is the distance from a map point to
+    /// the nearest wall or confirmed cell.
+    pub fn cycle(
+        &mut self,
+        dt_s: f64,
+        pose: Pose2D,
+        path: &[Pose2D],
+        movers_m: &[[f64; 2]],
+        free_m: impl Fn(f64, f64) -> f64,
+    ) -> Option<Hold> {
+        self.clock_s += dt_s;
+        let c = self.config;
+        if !c.enabled {
+            return None;
+        }
+        let Some(ahead) = Ahead::new(pose, path, c.look_m) else {
+            self.reset();
+            return None;
+        };
+        let moving = self.moving(movers_m);
+        let mover = self.track_mover(dt_s, &ahead, &moving);
+        let coming = mover.filter(|m| m.toward_mps > c.oncoming_mps);
+        if coming.is_some() {
+            self.last_seen_s = self.clock_s;
+        }
+        let narrow_from_m = coming
+            .or(mover.filter(|_| self.waiting.is_some()))
+            .and_then(|m| ahead.narrow_from(m.along_m + BODY_M, c.narrow_width_m, &free_m));
+        let recently = self.waiting.is_some() && self.clock_s - self.last_seen_s <= c.release_s;
+        let hold = match (narrow_from_m, mover) {
+            (Some(from_m), Some(m)) if (coming.is_some() || recently) && from_m > c.committed_m => {
+                if self.waiting.is_none() || self.wait_at_m.is_none() {
+                    self.wait_at_m = self.wait_spot(&ahead, from_m, m.left_m, &free_m);
+                }
+                Some(Hold {
+                    max_speed_mps: (2.0 * c.brake_mps2 * (from_m - c.hold_back_m).max(0.0)).sqrt(),
+                    wait_at_m: self.wait_at_m,
+                    narrow_from_m: from_m,
+                    mover_m: m.along_m,
+                })
+            }
+            _ => None,
+        };
+        match (hold, self.waiting) {
+            (Some(h), None) => {
+                self.waits += 1;
+                self.waiting = Some(self.clock_s);
+                tracing::debug!(
+                    narrow_from_m = h.narrow_from_m,
+                    mover_m = h.mover_m,
+                    track = ?self.track,
+                    ?pose,
+                    "giving way to someone coming through a narrow passage"
+                );
+            }
+            (Some(_), Some(_)) => self.waiting = Some(self.clock_s),
+            // A mover lost for a cycle or two at the edge of the view is not a new wait.
+            (None, Some(last_s)) if self.clock_s - last_s > c.release_s => {
+                self.waiting = None;
+                self.wait_at_m = None;
+            }
+            _ => {}
+        }
+        hold
+    }
+
+    /// The spot beside the path, `hold_back_m` short of the passage starting `from_m` along,
+    /// on the side away from the mover's line (`mover_left_m` to the left of the path), or on
+    /// the roomier side when it comes along the middle.
+    fn wait_spot(
+        &self,
+        ahead: &Ahead,
+        from_m: f64,
+        mover_left_m: f64,
+        free_m: impl Fn(f64, f64) -> f64,
+    ) -> Option<(f64, f64)> {
+        let c = self.config;
+        let (p, (tx, ty)) = ahead.at((from_m - c.hold_back_m).max(0.0));
+        let left = (-ty, tx);
+        let keep_m = c.robot_radius_m + c.wall_margin_m;
+        let room = |sign: f64| {
+            let mut t = 0.0;
+            while t < c.step_aside_m + keep_m
+                && free_m(p.0 + sign * t * left.0, p.1 + sign * t * left.1) > FREE_M
+            {
+                t += STEP_M;
+            }
+            (t - keep_m).min(c.step_aside_m)
+        };
+        let (room_left, room_right) = (room(1.0), room(-1.0));
+        // Away from their line; along the middle, the roomier side.
+        let left_side =
+            mover_left_m < -SIDE_M || (mover_left_m.abs() <= SIDE_M && room_left > room_right);
+        let sign = if left_side { 1.0 } else { -1.0 };
+        let shift_m = if sign > 0.0 { room_left } else { room_right };
+        (shift_m >= MIN_STEP_ASIDE_M)
+            .then_some((p.0 + sign * shift_m * left.0, p.1 + sign * shift_m * left.1))
+    }
+
+    /// The candidates that are moving: those in no cell (or next to one) that the candidates
+    /// of [`STILL_FROM`] to [`HISTORY`] cycles ago were in. Something standing there then is
+    /// still there; someone walking has moved on by more than a cell. The faces of a cabinet
+    /// the obstacle layer has not confirmed yet (seen edge-on, hit now and then) are standing
+    /// things too.
+    fn moving(&mut self, candidates_m: &[[f64; 2]]) -> Vec<[f64; 2]> {
+        let cell = |x: f64, y: f64| {
+            #[allow(clippy::cast_possible_truncation)]
+            (
+                (x / HISTORY_CELL_M).floor() as i64,
+                (y / HISTORY_CELL_M).floor() as i64,
+            )
+        };
+        let earlier: HashSet<(i64, i64)> = self
+            .history
+            .iter()
+            .take(self.history.len().saturating_sub(STILL_FROM))
+            .flatten()
+            .copied()
+            .collect();
+        let moving = candidates_m
+            .iter()
+            .filter(|&&[x, y]| {
+                let (ix, iy) = cell(x, y);
+                !(-1..=1).any(|dx| (-1..=1).any(|dy| earlier.contains(&(ix + dx, iy + dy))))
+            })
+            .copied()
+            .collect();
+        if self.history.len() == HISTORY {
+            self.history.pop_front();
+        }
+        self.history
+            .push_back(candidates_m.iter().map(|&[x, y]| cell(x, y)).collect());
+        moving
+    }
+
+    /// Follows the group of movers nearest along the path ahead.
+    fn track_mover(&mut self, dt_s: f64, ahead: &Ahead, movers_m: &[[f64; 2]]) -> Option<Mover> {
+        let lane = self.config.lane_m;
+        let nearest = movers_m
+            .iter()
+            .filter_map(|&[x, y]| {
+                let (s, off) = ahead.project(x, y)?;
+                (off.abs() <= lane && s > 0.0).then_some((s, x, y))
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0));
+        let Some((_, nx, ny)) = nearest else {
+            self.track = None;
+            return None;
+        };
+        let group: Vec<(f64, f64)> = movers_m
+            .iter()
+            .map(|&[x, y]| (x, y))
+            .filter(|&(x, y)| (x - nx).hypot(y - ny) <= GROUP_M)
+            .collect();
+        #[allow(clippy::cast_precision_loss)]
+        let n = group.len() as f64;
+        let (cx, cy) = group
+            .iter()
+            .fold((0.0, 0.0), |(sx, sy), &(x, y)| (sx + x / n, sy + y / n));
+        let track = match self.track {
+            Some(t) if dt_s > 0.0 => {
+                let (px, py) = (t.x_m + t.vx_mps * dt_s, t.y_m + t.vy_mps * dt_s);
+                if (cx - px).hypot(cy - py) <= ASSOCIATE_M {
+                    let (mx, my) = ((cx - t.x_m) / dt_s, (cy - t.y_m) / dt_s);
+                    let g = if t.age_s < MIN_TRACK_S {
+                        0.6
+                    } else {
+                        VELOCITY_GAIN
+                    };
+                    Track {
+                        x_m: cx,
+                        y_m: cy,
+                        vx_mps: t.vx_mps + g * (mx - t.vx_mps),
+                        vy_mps: t.vy_mps + g * (my - t.vy_mps),
+                        age_s: t.age_s + dt_s,
+                    }
+                } else {
+                    Track::at(cx, cy)
+                }
+            }
+            _ => Track::at(cx, cy),
+        };
+        self.track = Some(track);
+        let (along_m, left_m) = ahead.project(cx, cy)?;
+        let (tx, ty) = ahead.tangent(along_m);
+        let toward_mps = if track.age_s >= MIN_TRACK_S {
+            -(track.vx_mps * tx + track.vy_mps * ty)
+        } else {
+            0.0
+        };
+        Some(Mover {
+            along_m,
+            left_m,
+            toward_mps,
+        })
+    }
+}
+
+impl Track {
+    fn at(x_m: f64, y_m: f64) -> Self {
+        Self {
+            x_m,
+            y_m,
+            vx_mps: 0.0,
+            vy_mps: 0.0,
+            age_s: 0.0,
+        }
+    }
+}
+
+/// The tracked mover as seen along the path.
+#[derive(Debug, Clone, Copy)]
+struct Mover {
+    along_m: f64,
+    left_m: f64,
+    /// Its speed towards the robot along the path (0 while the track is young).
+    toward_mps: f64,
+}
+
+/// The path ahead of the robot: from its nearest point, `look_m` long, with arc lengths.
+struct Ahead {
+    points: Vec<(f64, f64)>,
+    arc_m: Vec<f64>,
+}
+
+impl Ahead {
+    fn new(pose: Pose2D, path: &[Pose2D], look_m: f64) -> Option<Self> {
+        let mut along_m = 0.0;
+        let mut nearest = (f64::INFINITY, 0);
+        for (i, p) in path.iter().enumerate() {
+            if i > 0 {
+                along_m += path[i - 1].distance_m(p);
+            }
+            if along_m > NEAREST_WINDOW_M {
+                break;
+            }
+            let d = p.distance_m(&pose);
+            if d < nearest.0 {
+                nearest = (d, i);
+            }
+        }
+        let mut points = vec![(pose.x_m, pose.y_m)];
+        let mut arc_m = vec![0.0];
+        for p in &path[nearest.1.min(path.len())..] {
+            let last = points[points.len() - 1];
+            let step = (p.x_m - last.0).hypot(p.y_m - last.1);
+            if step < 1e-6 {
+                continue;
+            }
+            let s = arc_m[arc_m.len() - 1] + step;
+            points.push((p.x_m, p.y_m));
+            arc_m.push(s);
+            if s >= look_m {
+                break;
+            }
+        }
+        (points.len() >= 2).then_some(Self { points, arc_m })
+    }
+
+    /// (distance along, signed offset to the left) of the nearest point of the path to (x, y).
+    fn project(&self, x: f64, y: f64) -> Option<(f64, f64)> {
+        let mut best: Option<(f64, f64, f64)> = None;
+        for i in 0..self.points.len() - 1 {
+            let (a, b) = (self.points[i], self.points[i + 1]);
+            let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+            let len = dx.hypot(dy);
+            let t = (((x - a.0) * dx + (y - a.1) * dy) / (len * len)).clamp(0.0, 1.0);
+            let (fx, fy) = (a.0 + t * dx, a.1 + t * dy);
+            let d = (x - fx).hypot(y - fy);
+            if best.is_none_or(|(bd, _, _)| d < bd) {
+                let left = (dx * (y - a.1) - dy * (x - a.0)) / len;
+                best = Some((d, self.arc_m[i] + t * len, left));
+            }
+        }
+        best.map(|(_, s, left)| (s, left))
+    }
+
+    /// The point and unit tangent at distance `s_m` along.
+    fn at(&self, s_m: f64) -> ((f64, f64), (f64, f64)) {
+        let i = self
+            .arc_m
+            .windows(2)
+            .position(|w| s_m <= w[1])
+            .unwrap_or(self.arc_m.len() - 2);
+        let (a, b) = (self.points[i], self.points[i + 1]);
+        let len = (self.arc_m[i + 1] - self.arc_m[i]).max(1e-9);
+        let t = ((s_m - self.arc_m[i]) / len).clamp(0.0, 1.0);
+        (
+            (a.0 + t * (b.0 - a.0), a.1 + t * (b.1 - a.1)),
+            ((b.0 - a.0) / len, (b.1 - a.1) / len),
+        )
+    }
+
+    fn tangent(&self, s_m: f64) -> (f64, f64) {
+        self.at(s_m).1
+    }
+
+    /// Where the first stretch narrower than `width_m` starts, up to `until_m` along.
+    fn narrow_from(
+        &self,
+        until_m: f64,
+        width_m: f64,
+        free_m: impl Fn(f64, f64) -> f64,
+    ) -> Option<f64> {
+        let end_m = until_m.min(self.arc_m[self.arc_m.len() - 1]);
+        let side = |p: (f64, f64), n: (f64, f64)| {
+            let mut t = 0.0;
+            while t < width_m && free_m(p.0 + t * n.0, p.1 + t * n.1) > FREE_M {
+                t += STEP_M;
+            }
+            t
+        };
+        let mut s = 0.0;
+        while s <= end_m {
+            let (p, (tx, ty)) = self.at(s);
+            let left = side(p, (-ty, tx));
+            if left < width_m && left + side(p, (ty, -tx)) < width_m {
+                return Some(s);
+            }
+            s += STEP_M;
+        }
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Task C's corridor (y 12–14) with its cabinet (x 25.6–26.4, y 12.1–12.9): the distance to
+    /// the nearest wall or cabinet face.
+    fn corridor(x: f64, y: f64) -> f64 {
+        let walls = (y - 12.0).min(14.0 - y);
+        let dx = (25.6 - x).max(x - 26.4).max(0.0);
+        let dy = (12.1 - y).max(y - 12.9).max(0.0);
+        walls.min(dx.hypot(dy))
+    }
+
+    /// The path west along the corridor, through the gap beside the cabinet.
+    fn path_west(from_x: f64) -> Vec<Pose2D> {
+        (0..80)
+            .map(|i| {
+                let x = from_x - 0.2 * f64::from(i);
+                let y = if (24.8..=27.2).contains(&x) {
+                    13.45
+                } else {
+                    13.2
+                };
+                Pose2D::new(x, y, std::f64::consts::PI)
+            })
+            .collect()
+    }
+
+    /// A person's front: returns on the east half of a 0.25 m disc at (x, y).
+    fn person(x: f64, y: f64) -> Vec<[f64; 2]> {
+        (-4..=4)
+            .map(|k| {
+                let a = f64::from(k) * 0.3;
+                [x + 0.25 * a.cos(), y + 0.25 * a.sin()]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn waits_short_of_the_gap_while_someone_comes_through_it() {
+        let mut gw = GiveWay::new(GiveWayConfig::default());
+        let (mut robot_x, mut person_x, mut person_y): (f64, f64, f64) = (29.5, 23.0, 13.3);
+        let in_gap = |x: f64| (25.35..=26.65).contains(&x);
+        let mut closest_wait_x = f64::INFINITY;
+        for k in 0..300 {
+            let pose = Pose2D::new(robot_x, 13.2, std::f64::consts::PI);
+            let hold = gw.cycle(
+                0.1,
+                pose,
+                &path_west(robot_x),
+                &person(person_x, person_y),
+                corridor,
+            );
+            let mut v = hold.map_or(0.7, |h| h.max_speed_mps.min(0.7));
+            if hold.is_some() {
+                closest_wait_x = closest_wait_x.min(robot_x);
+            }
+            // The collision monitor: never closer than 0.6 m to the person.
+            if (robot_x - 0.1 * v - person_x).hypot(13.2 - person_y) < 0.6 {
+                v = 0.0;
+            }
+            robot_x -= 0.1 * v;
+            // The person walks east on their line and, out of the gap with the robot in the
+            // way, steps aside.
+            if (robot_x - person_x - 0.06).hypot(13.2 - person_y) >= 0.6 {
+                person_x += 0.06;
+            } else if person_x > 26.7 {
+                person_y = 12.5;
+            }
+            assert!(
+                !(in_gap(robot_x) && in_gap(person_x)),
+                "met in the gap at step {k}: robot {robot_x}, person {person_x}"
+            );
+        }
+        assert_eq!(gw.waits(), 1);
+        assert!(
+            closest_wait_x > 26.4 + 0.8,
+            "waits about a metre short of the gap: {closest_wait_x}"
+        );
+        assert!(
+            robot_x < 24.0,
+            "through once the person came out: {robot_x}"
+        );
+    }
+
+    #[test]
+    fn drives_on_for_someone_walking_ahead_or_a_wide_corridor() {
+        let mut gw = GiveWay::new(GiveWayConfig::default());
+        // Someone walking away from the robot through the gap: follow, no waiting.
+        for k in 0..30 {
+            let t = 0.1 * f64::from(k);
+            let pose = Pose2D::new(29.0 - 0.4 * t, 13.2, std::f64::consts::PI);
+            let hold = gw.cycle(
+                0.1,
+                pose,
+                &path_west(pose.x_m),
+                &person(27.0 - 0.6 * t, 13.3),
+                corridor,
+            );
+            assert!(hold.is_none(), "waited for someone walking away at {t} s");
+        }
+        // Someone coming the other way in a wide corridor (no cabinet): pass.
+        let mut gw = GiveWay::new(GiveWayConfig::default());
+        let wide = |_: f64, y: f64| (y - 12.0).min(14.0 - y);
+        for k in 0..30 {
+            let t = 0.1 * f64::from(k);
+            let pose = Pose2D::new(29.0 - 0.4 * t, 13.2, std::f64::consts::PI);
+            let hold = gw.cycle(
+                0.1,
+                pose,
+                &path_west(pose.x_m),
+                &person(24.0 + 0.6 * t, 13.3),
+                wide,
+            );
+            assert!(hold.is_none(), "waited in a 2 m corridor at {t} s");
+        }
+    }
+
+    #[test]
+    fn goes_on_through_a_passage_it_has_entered() {
+        let mut gw = GiveWay::new(GiveWayConfig::default());
+        for k in 0..10 {
+            let t = 0.1 * f64::from(k);
+            // In the gap already, the person coming towards its far end.
+            let pose = Pose2D::new(26.2 - 0.3 * t, 13.45, std::f64::consts::PI);
+            let hold = gw.cycle(
+                0.1,
+                pose,
+                &path_west(pose.x_m),
+                &person(23.0 + 0.6 * t, 13.3),
+                corridor,
+            );
+            assert!(hold.is_none(), "stopped inside the gap at {t} s");
+        }
+    }
+
+    #[test]
+    fn bad_values_are_named() {
+        let bad = GiveWayConfig {
+            hold_back_m: -1.0,
+            ..GiveWayConfig::default()
+        };
+        match bad.validate() {
+            Err(ConfigError::Invalid { field, .. }) => assert_eq!(field, "give_way.hold_back_m"),
+            other => panic!("{other:?}"),
+        }
+        GiveWayConfig::default().validate().expect("defaults");
+    }
+}
