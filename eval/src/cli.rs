@@ -215,17 +215,19 @@ pub struct TableArgs {
     #[arg(long)]
     no_collision_monitor: bool,
     /// Never lets the dynamic window relieve a controller the collision monitor holds
-    /// (`[safety.recovery]`): the controller alone.
+    /// (`[safety.recovery]`), nor the agent's rotation shim turn the robot or its give-way rule
+    /// make it wait (`[rotation_shim]`, `[give_way]`): the controller alone, as the tables that
+    /// measure a network by itself have always run it.
     #[arg(long)]
     no_recovery: bool,
     /// Lets the controller turn the robot round itself when its path starts behind it, without
-    /// the agent's rotation shim (`[rotation_shim]`): the controller alone, as in the paper and
-    /// in every table before 2026-11-27's sixteenth session.
+    /// the agent's rotation shim (`[rotation_shim]`), as in every table before 2026-11-27's
+    /// sixteenth session (`--no-recovery` implies it).
     #[arg(long)]
     no_rotation_shim: bool,
     /// Lets the robot drive into a narrow passage whoever comes through it the other way,
     /// without the agent's give-way rule (`[give_way]`), as in every table before 2026-11-27's
-    /// sixteenth session.
+    /// sixteenth session (`--no-recovery` implies it).
     #[arg(long)]
     no_give_way: bool,
     /// Plans on the floor plan alone: the agent reports no obstacles its laser sees where the
@@ -513,10 +515,10 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
     if args.no_recovery {
         agent.safety.recovery.enabled = false;
     }
-    if args.no_rotation_shim {
+    if args.no_rotation_shim || args.no_recovery {
         agent.rotation_shim.enabled = false;
     }
-    if args.no_give_way {
+    if args.no_give_way || args.no_recovery {
         agent.give_way.enabled = false;
     }
     if args.no_seen_obstacles {
