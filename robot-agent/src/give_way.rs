@@ -29,6 +29,7 @@ use protocol::Pose2D;
 
 use crate::config::ConfigError;
 use crate::controllers::path_tracker::{check_non_negative, check_positive};
+use crate::rotation_shim::nearest_index;
 
 /// The `[give_way]` table.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -132,8 +133,6 @@ const MOVER_SEEN_GAP_M: f64 = 0.2;
 const SIDE_M: f64 = 0.15;
 /// A step aside shorter than this is not worth making.
 const MIN_STEP_ASIDE_M: f64 = 0.2;
-/// How far along the path the robot's nearest point is looked for.
-const NEAREST_WINDOW_M: f64 = 1.5;
 
 /// The mover followed from cycle to cycle.
 #[derive(Debug, Clone, Copy)]
@@ -445,23 +444,9 @@ struct Ahead {
 
 impl Ahead {
     fn new(pose: Pose2D, path: &[Pose2D], look_m: f64) -> Option<Self> {
-        let mut along_m = 0.0;
-        let mut nearest = (f64::INFINITY, 0);
-        for (i, p) in path.iter().enumerate() {
-            if i > 0 {
-                along_m += path[i - 1].distance_m(p);
-            }
-            if along_m > NEAREST_WINDOW_M {
-                break;
-            }
-            let d = p.distance_m(&pose);
-            if d < nearest.0 {
-                nearest = (d, i);
-            }
-        }
         let mut points = vec![(pose.x_m, pose.y_m)];
         let mut arc_m = vec![0.0];
-        for p in &path[nearest.1.min(path.len())..] {
+        for p in &path[nearest_index(pose, path).min(path.len())..] {
             let last = points[points.len() - 1];
             let step = (p.x_m - last.0).hypot(p.y_m - last.1);
             if step < 1e-6 {

@@ -848,9 +848,7 @@ fn to_wait_spot(pose: Pose2D, spot: (f64, f64), limits: &Limits) -> (f64, f64) {
     if d <= WAIT_SPOT_REACHED_M {
         return (0.0, 0.0);
     }
-    let error = (dy.atan2(dx) - pose.yaw_rad + std::f64::consts::PI)
-        .rem_euclid(std::f64::consts::TAU)
-        - std::f64::consts::PI;
+    let error = protocol::normalize_angle(dy.atan2(dx) - pose.yaw_rad);
     let w = (1.5 * error).clamp(-limits.max_turn_radps, limits.max_turn_radps);
     if error.abs() > 0.6 {
         return (0.0, w);

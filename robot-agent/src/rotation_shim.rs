@@ -19,7 +19,7 @@
 //! [`Supervisor`](crate::Supervisor) gives the shim precedence over the driving controller, not
 //! over the dynamic window while that recovers.
 
-use protocol::Pose2D;
+use protocol::{normalize_angle, Pose2D};
 
 use crate::config::ConfigError;
 use crate::controllers::path_tracker::check_positive;
@@ -213,6 +213,16 @@ pub fn heading_error_rad(pose: Pose2D, path: &[Pose2D], ahead_m: f64) -> Option<
     if path.len() < 2 {
         return None;
     }
+    let target = path[nearest_index(pose, path)..]
+        .iter()
+        .find(|p| p.distance_m(&pose) >= ahead_m)?;
+    let bearing = (target.y_m - pose.y_m).atan2(target.x_m - pose.x_m);
+    Some(normalize_angle(bearing - pose.yaw_rad))
+}
+
+/// The index of the path pose nearest to `pose` among those within [`NEAREST_WINDOW_M`] of the
+/// path's start (0 for an empty path): where the robot is along the path it was sent.
+pub(crate) fn nearest_index(pose: Pose2D, path: &[Pose2D]) -> usize {
     let mut along_m = 0.0;
     let mut nearest = (f64::INFINITY, 0);
     for (i, p) in path.iter().enumerate() {
@@ -227,15 +237,7 @@ pub fn heading_error_rad(pose: Pose2D, path: &[Pose2D], ahead_m: f64) -> Option<
             nearest = (d, i);
         }
     }
-    let target = path[nearest.1..]
-        .iter()
-        .find(|p| p.distance_m(&pose) >= ahead_m)?;
-    let bearing = (target.y_m - pose.y_m).atan2(target.x_m - pose.x_m);
-    Some(wrap(bearing - pose.yaw_rad))
-}
-
-fn wrap(a: f64) -> f64 {
-    (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI
+    nearest.1
 }
 
 #[cfg(test)]
@@ -262,7 +264,7 @@ mod tests {
         assert!(w.abs() > 0.9, "full turn rate far off the heading: {w}");
         let mut cycles = 0;
         while let Some((_, w)) = shim.command(pose, 0.0, &path, 1.2) {
-            pose.yaw_rad = wrap(pose.yaw_rad + 0.1 * w);
+            pose.yaw_rad = normalize_angle(pose.yaw_rad + 0.1 * w);
             cycles += 1;
             assert!(cycles < 100, "the turn ends");
         }
