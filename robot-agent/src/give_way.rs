@@ -613,55 +613,55 @@ mod tests {
         );
     }
 
+    /// Runs `cycles` cycles of 0.1 s with the robot at `robot_at(t)` on the path west and the
+    /// person's front at `person_x(t)` on y = 13.3; the first time it was made to wait.
+    fn first_wait(
+        cycles: u16,
+        robot_at: impl Fn(f64) -> Pose2D,
+        person_x: impl Fn(f64) -> f64,
+        free_m: impl Fn(f64, f64) -> f64 + Copy,
+    ) -> Option<f64> {
+        let mut gw = GiveWay::new(GiveWayConfig::default());
+        (0..cycles).map(|k| 0.1 * f64::from(k)).find(|&t| {
+            let pose = robot_at(t);
+            gw.cycle(
+                0.1,
+                pose,
+                &path_west(pose.x_m),
+                &person(person_x(t), 13.3),
+                free_m,
+            )
+            .is_some()
+        })
+    }
+
     #[test]
     fn drives_on_for_someone_walking_ahead_or_a_wide_corridor() {
-        let mut gw = GiveWay::new(GiveWayConfig::default());
+        let west = |x0: f64, y: f64, v: f64| {
+            move |t: f64| Pose2D::new(x0 - v * t, y, std::f64::consts::PI)
+        };
         // Someone walking away from the robot through the gap: follow, no waiting.
-        for k in 0..30 {
-            let t = 0.1 * f64::from(k);
-            let pose = Pose2D::new(29.0 - 0.4 * t, 13.2, std::f64::consts::PI);
-            let hold = gw.cycle(
-                0.1,
-                pose,
-                &path_west(pose.x_m),
-                &person(27.0 - 0.6 * t, 13.3),
-                corridor,
-            );
-            assert!(hold.is_none(), "waited for someone walking away at {t} s");
-        }
+        let t = first_wait(30, west(29.0, 13.2, 0.4), |t| 27.0 - 0.6 * t, corridor);
+        assert_eq!(t, None, "waited for someone walking away");
         // Someone coming the other way in a wide corridor (no cabinet): pass.
-        let mut gw = GiveWay::new(GiveWayConfig::default());
         let wide = |_: f64, y: f64| (y - 12.0).min(14.0 - y);
-        for k in 0..30 {
-            let t = 0.1 * f64::from(k);
-            let pose = Pose2D::new(29.0 - 0.4 * t, 13.2, std::f64::consts::PI);
-            let hold = gw.cycle(
-                0.1,
-                pose,
-                &path_west(pose.x_m),
-                &person(24.0 + 0.6 * t, 13.3),
-                wide,
-            );
-            assert!(hold.is_none(), "waited in a 2 m corridor at {t} s");
-        }
+        let t = first_wait(30, west(29.0, 13.2, 0.4), |t| 24.0 + 0.6 * t, wide);
+        assert_eq!(t, None, "waited in a 2 m corridor");
+        // The same person in the gap's corridor: the robot waits.
+        let t = first_wait(30, west(29.0, 13.2, 0.4), |t| 24.0 + 0.6 * t, corridor);
+        assert!(t.is_some(), "no wait for someone coming through the gap");
     }
 
     #[test]
     fn goes_on_through_a_passage_it_has_entered() {
-        let mut gw = GiveWay::new(GiveWayConfig::default());
-        for k in 0..10 {
-            let t = 0.1 * f64::from(k);
-            // In the gap already, the person coming towards its far end.
-            let pose = Pose2D::new(26.2 - 0.3 * t, 13.45, std::f64::consts::PI);
-            let hold = gw.cycle(
-                0.1,
-                pose,
-                &path_west(pose.x_m),
-                &person(23.0 + 0.6 * t, 13.3),
-                corridor,
-            );
-            assert!(hold.is_none(), "stopped inside the gap at {t} s");
-        }
+        // In the gap already, the person coming towards its far end.
+        let t = first_wait(
+            10,
+            |t| Pose2D::new(26.2 - 0.3 * t, 13.45, std::f64::consts::PI),
+            |t| 23.0 + 0.6 * t,
+            corridor,
+        );
+        assert_eq!(t, None, "stopped inside the gap");
     }
 
     #[test]
