@@ -18,7 +18,8 @@ if [ ! -x "$PY" ]; then
 fi
 # The versions these tests last passed with (training/pyproject.toml gives the ranges).
 if ! "$PY" -c 'import torch, onnx, matplotlib, tqdm, PIL' 2>/dev/null; then
-  "$PY" -m pip install --quiet --disable-pip-version-check \
+  # No pip cache: the wheels would stay on the disk beside the 5 GB they install.
+  "$PY" -m pip install --quiet --disable-pip-version-check --no-cache-dir \
     "torch==2.15.0" "onnx==1.23.2" "matplotlib==3.11.2" "tqdm==4.70.1" "pillow==13.0.0"
 fi
 "$PY" training/tests/test_smoke.py --seconds "$secs"
