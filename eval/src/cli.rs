@@ -216,8 +216,9 @@ pub struct TableArgs {
     no_collision_monitor: bool,
     /// Never lets the dynamic window relieve a controller the collision monitor holds
     /// (`[safety.recovery]`), nor the agent's rotation shim turn the robot or its give-way rule
-    /// make it wait (`[rotation_shim]`, `[give_way]`): the controller alone, as the tables that
-    /// measure a network by itself have always run it.
+    /// make it wait (`[rotation_shim]`, `[give_way]`), and the monitor takes every return to
+    /// stand still (as `--no-mover-tracking`): the controller alone, as the tables that measure
+    /// a network by itself have always run it.
     #[arg(long)]
     no_recovery: bool,
     /// Lets the controller turn the robot round itself when its path starts behind it, without
@@ -230,6 +231,11 @@ pub struct TableArgs {
     /// sixteenth session (`--no-recovery` implies it).
     #[arg(long)]
     no_give_way: bool,
+    /// The collision monitor takes every laser return to stand still, without moving walking
+    /// bodies on by their tracked velocity (`[safety.collision_monitor] track_movers` off), as
+    /// in every table before 2026-11-27's seventeenth session (`--no-recovery` implies it).
+    #[arg(long)]
+    no_mover_tracking: bool,
     /// Plans on the floor plan alone: the agent reports no obstacles its laser sees where the
     /// plan is free (`[unmapped_obstacles]` off) and the planner routes round none
     /// (`[seen_obstacles]` off), as in every table before 2026-11-27's fifteenth session.
@@ -520,6 +526,9 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
     }
     if args.no_give_way || args.no_recovery {
         agent.give_way.enabled = false;
+    }
+    if args.no_mover_tracking || args.no_recovery {
+        agent.safety.collision_monitor.track_movers = false;
     }
     if args.no_seen_obstacles {
         agent.unmapped_obstacles.enabled = false;

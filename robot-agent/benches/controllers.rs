@@ -117,7 +117,7 @@ fn bench_step(c: &mut Criterion) {
     // 0.8 m before the box's face: at 0.7 m/s the disc would touch it within the horizon.
     let near = Pose2D::new(5.9, 7.5, 0.0);
     let near_scan = amcl_world::Laser::default().scan(&truth, &near, 0, &mut rng);
-    assert!(collision_monitor::check(&monitor, &near_scan, 0.7, 0.0).limited());
+    assert!(collision_monitor::check(&monitor, &near_scan, &[], 0.7, 0.0).limited());
     let mut group = c.benchmark_group("collision_monitor");
     group.sample_size(30);
     // Straight at the box at full speed: limited, the arc checked again at lower speeds.
@@ -126,6 +126,27 @@ fn bench_step(c: &mut Criterion) {
             black_box(collision_monitor::check(
                 &monitor,
                 black_box(&near_scan),
+                &[],
+                0.7,
+                0.0,
+            ))
+        });
+    });
+    // The same, with the box's near face taken for someone walking across at 1 m/s: every
+    // return within reach looked up against the body, and the body's returns moved each step.
+    let walking = [collision_monitor::MovingBody {
+        x_m: 0.8,
+        y_m: 0.0,
+        reach_m: 0.6,
+        vx_mps: 0.0,
+        vy_mps: 1.0,
+    }];
+    group.bench_function("check_towards_someone_crossing", |b| {
+        b.iter(|| {
+            black_box(collision_monitor::check(
+                &monitor,
+                black_box(&near_scan),
+                black_box(&walking),
                 0.7,
                 0.0,
             ))
@@ -137,6 +158,7 @@ fn bench_step(c: &mut Criterion) {
             black_box(collision_monitor::check(
                 &monitor,
                 black_box(&scan),
+                &[],
                 0.3,
                 1.0,
             ))

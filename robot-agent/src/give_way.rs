@@ -9,10 +9,10 @@
 //! truth (`eval::expert`); this is the same rule on what the robot itself sees.
 //!
 //! - **Someone coming:** the laser returns that lie neither on the floor plan's walls nor on the
-//!   obstacle layer's confirmed cells ([`crate::unmapped`]) are movers. Of those within
-//!   `lane_m` of the path ahead (up to `look_m`), the group nearest along the path is tracked
-//!   from cycle to cycle; its velocity along the path says whether it comes towards the robot
-//!   (faster than `oncoming_mps`).
+//!   obstacle layer's confirmed cells ([`crate::unmapped`]) and move are tracked as bodies
+//!   ([`crate::movers`]). Of those with a return within `lane_m` of the path ahead (up to
+//!   `look_m`), the one nearest along the path is the mover; its velocity along the path says
+//!   whether it comes towards the robot (faster than `oncoming_mps`).
 //! - **A narrow passage between:** the width across the path (to walls and confirmed cells,
 //!   both sides) below `narrow_width_m` somewhere between the robot and them.
 //! - **Wait short of it:** the speed is capped so that the robot stops `hold_back_m` before the
@@ -20,15 +20,14 @@
 //!   robot is within `committed_m` of it or in it already (better to go on through). It waits
 //!   while they keep coming, and `release_s` after.
 //!
-//! Plain data in (pose, path, movers, a free-space function), a speed cap out; the
+//! Plain data in (pose, path, tracks, a free-space function), a speed cap out; the
 //! [`Supervisor`](crate::Supervisor) caps whichever controller drives.
-
-use std::collections::{HashSet, VecDeque};
 
 use protocol::Pose2D;
 
 use crate::config::ConfigError;
 use crate::controllers::path_tracker::{check_non_negative, check_positive};
+use crate::movers::Track;
 use crate::rotation_shim::nearest_index;
 
 /// The `[give_way]` table.
@@ -58,7 +57,8 @@ pub struct GiveWayConfig {
     pub brake_mps2: f64,
     /// The robot waits this long after the last sight of someone coming.
     pub release_s: f64,
-    /// A laser return at least this far from the floor plan's walls is not a wall.
+    /// A laser return at least this far from the floor plan's walls is not a wall (read by
+    /// the mover tracking for the collision monitor too, also when the rule is off).
     pub min_map_gap_m: f64,
 }
 
@@ -109,40 +109,14 @@ impl GiveWayConfig {
 
 /// Spacing of the width checks along the path, and of the steps across it.
 const STEP_M: f64 = 0.05;
-/// Returns within this of the group's nearest one belong to the same mover.
-const GROUP_M: f64 = 0.5;
 /// The returns are a mover's near side; its body reaches this much further.
 const BODY_M: f64 = 0.5;
-/// A group this close to where the tracked one was expected is the same mover.
-const ASSOCIATE_M: f64 = 0.4;
-/// Weight of the newest velocity measurement in the tracked velocity.
-const VELOCITY_GAIN: f64 = 0.3;
-/// A track younger than this has no velocity to judge by.
-const MIN_TRACK_S: f64 = 0.5;
 /// Free space across the path is measured this far from an obstacle's edge.
 const FREE_M: f64 = 0.05;
-/// Cycles of candidate returns remembered ...
-const HISTORY: usize = 20;
-/// ... of which those at least this many cycles old say what stands still.
-const STILL_FROM: usize = 10;
-/// Side of the cells the history is kept in.
-const HISTORY_CELL_M: f64 = 0.1;
-/// A mover's returns lie at least this far from the obstacle layer's confirmed cells.
-const MOVER_SEEN_GAP_M: f64 = 0.2;
 /// A mover further than this from the path's centre line comes along one side of it.
 const SIDE_M: f64 = 0.15;
 /// A step aside shorter than this is not worth making.
 const MIN_STEP_ASIDE_M: f64 = 0.2;
-
-/// The mover followed from cycle to cycle.
-#[derive(Debug, Clone, Copy)]
-struct Track {
-    x_m: f64,
-    y_m: f64,
-    vx_mps: f64,
-    vy_mps: f64,
-    age_s: f64,
-}
 
 /// Why the robot waits, and where.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -160,11 +134,10 @@ pub struct Hold {
     pub mover_m: f64,
 }
 
-/// The give-way state: the tracked mover and the wait.
+/// The give-way state: the wait.
 #[derive(Debug, Clone, Default)]
 pub struct GiveWay {
     config: GiveWayConfig,
-    track: Option<Track>,
     clock_s: f64,
     /// The last cycle the robot was held, while it counts as waiting.
     waiting: Option<f64>,
@@ -172,8 +145,6 @@ pub struct GiveWay {
     last_seen_s: f64,
     /// Where this wait takes place (chosen when it starts).
     wait_at_m: Option<(f64, f64)>,
-    /// The cells of the last cycles' candidate returns, newest last.
-    history: VecDeque<HashSet<(i64, i64)>>,
     waits: u32,
 }
 
@@ -198,33 +169,21 @@ impl GiveWay {
         self.waiting.is_some()
     }
 
-    /// Forgets the mover and the wait (a stop, an intervention).
+    /// Forgets the wait (a stop, an intervention).
     pub fn reset(&mut self) {
-        self.track = None;
         self.waiting = None;
         self.wait_at_m = None;
-        self.history.clear();
-    }
-
-    /// Whether a laser return could be a mover: `map_gap_m` from the floor plan's nearest wall
-    /// and `seen_gap_m` from the obstacle layer's nearest confirmed cell. Returns on a
-    /// cabinet's faces that the layer has not confirmed yet (seen edge-on, a beam now and then)
-    /// lie next to ones it has; someone walking by keeps their body's width off anything.
-    #[must_use]
-    pub fn off_the_plan(&self, map_gap_m: f64, seen_gap_m: f64) -> bool {
-        map_gap_m >= self.config.min_map_gap_m && seen_gap_m >= MOVER_SEEN_GAP_M
     }
 
     /// One cycle of `dt_s`: the speed cap while the robot must wait, `None` when it may drive.
-    /// `movers_m` are this cycle's laser returns off the floor plan and off the obstacle
-    /// layer's confirmed cells (map frame); `free_m(x, y)` is the distance from a map point to
-    /// the nearest wall or confirmed cell.
+    /// `tracks` are this cycle's moving bodies ([`crate::movers`], map frame); `free_m(x, y)`
+    /// is the distance from a map point to the nearest wall or confirmed cell.
     pub fn cycle(
         &mut self,
         dt_s: f64,
         pose: Pose2D,
         path: &[Pose2D],
-        movers_m: &[[f64; 2]],
+        tracks: &[Track],
         free_m: impl Fn(f64, f64) -> f64,
     ) -> Option<Hold> {
         self.clock_s += dt_s;
@@ -236,8 +195,7 @@ impl GiveWay {
             self.reset();
             return None;
         };
-        let moving = self.moving(movers_m);
-        let mover = self.track_mover(dt_s, &ahead, &moving);
+        let mover = self.mover(&ahead, tracks);
         let coming = mover.filter(|m| m.toward_mps > c.oncoming_mps);
         if coming.is_some() {
             self.last_seen_s = self.clock_s;
@@ -267,7 +225,7 @@ impl GiveWay {
                 tracing::debug!(
                     narrow_from_m = h.narrow_from_m,
                     mover_m = h.mover_m,
-                    track = ?self.track,
+                    toward_mps = mover.map(|m| m.toward_mps),
                     ?pose,
                     "giving way to someone coming through a narrow passage"
                 );
@@ -316,93 +274,27 @@ impl GiveWay {
             .then_some((p.0 + sign * shift_m * left.0, p.1 + sign * shift_m * left.1))
     }
 
-    /// The candidates that are moving: those in no cell (or next to one) that the candidates
-    /// of [`STILL_FROM`] to [`HISTORY`] cycles ago were in. Something standing there then is
-    /// still there; someone walking has moved on by more than a cell. The faces of a cabinet
-    /// the obstacle layer has not confirmed yet (seen edge-on, hit now and then) are standing
-    /// things too.
-    fn moving(&mut self, candidates_m: &[[f64; 2]]) -> Vec<[f64; 2]> {
-        let cell = |x: f64, y: f64| {
-            #[allow(clippy::cast_possible_truncation)]
-            (
-                (x / HISTORY_CELL_M).floor() as i64,
-                (y / HISTORY_CELL_M).floor() as i64,
-            )
-        };
-        let earlier: HashSet<(i64, i64)> = self
-            .history
-            .iter()
-            .take(self.history.len().saturating_sub(STILL_FROM))
-            .flatten()
-            .copied()
-            .collect();
-        let moving = candidates_m
-            .iter()
-            .filter(|&&[x, y]| {
-                let (ix, iy) = cell(x, y);
-                !(-1..=1).any(|dx| (-1..=1).any(|dy| earlier.contains(&(ix + dx, iy + dy))))
-            })
-            .copied()
-            .collect();
-        if self.history.len() == HISTORY {
-            self.history.pop_front();
-        }
-        self.history
-            .push_back(candidates_m.iter().map(|&[x, y]| cell(x, y)).collect());
-        moving
-    }
-
-    /// Follows the group of movers nearest along the path ahead.
-    fn track_mover(&mut self, dt_s: f64, ahead: &Ahead, movers_m: &[[f64; 2]]) -> Option<Mover> {
+    /// The body nearest along the path ahead with a return within `lane_m` of it, as seen
+    /// along the path.
+    fn mover(&self, ahead: &Ahead, tracks: &[Track]) -> Option<Mover> {
         let lane = self.config.lane_m;
-        let nearest = movers_m
+        let (_, track) = tracks
             .iter()
-            .filter_map(|&[x, y]| {
-                let (s, off) = ahead.project(x, y)?;
-                (off.abs() <= lane && s > 0.0).then_some((s, x, y))
+            .filter_map(|t| {
+                let s = t
+                    .points_m
+                    .iter()
+                    .filter_map(|&[x, y]| {
+                        let (s, off) = ahead.project(x, y)?;
+                        (off.abs() <= lane && s > 0.0).then_some(s)
+                    })
+                    .min_by(f64::total_cmp)?;
+                Some((s, t))
             })
-            .min_by(|a, b| a.0.total_cmp(&b.0));
-        let Some((_, nx, ny)) = nearest else {
-            self.track = None;
-            return None;
-        };
-        let group: Vec<(f64, f64)> = movers_m
-            .iter()
-            .map(|&[x, y]| (x, y))
-            .filter(|&(x, y)| (x - nx).hypot(y - ny) <= GROUP_M)
-            .collect();
-        #[allow(clippy::cast_precision_loss)]
-        let n = group.len() as f64;
-        let (cx, cy) = group
-            .iter()
-            .fold((0.0, 0.0), |(sx, sy), &(x, y)| (sx + x / n, sy + y / n));
-        let track = match self.track {
-            Some(t) if dt_s > 0.0 => {
-                let (px, py) = (t.x_m + t.vx_mps * dt_s, t.y_m + t.vy_mps * dt_s);
-                if (cx - px).hypot(cy - py) <= ASSOCIATE_M {
-                    let (mx, my) = ((cx - t.x_m) / dt_s, (cy - t.y_m) / dt_s);
-                    let g = if t.age_s < MIN_TRACK_S {
-                        0.6
-                    } else {
-                        VELOCITY_GAIN
-                    };
-                    Track {
-                        x_m: cx,
-                        y_m: cy,
-                        vx_mps: t.vx_mps + g * (mx - t.vx_mps),
-                        vy_mps: t.vy_mps + g * (my - t.vy_mps),
-                        age_s: t.age_s + dt_s,
-                    }
-                } else {
-                    Track::at(cx, cy)
-                }
-            }
-            _ => Track::at(cx, cy),
-        };
-        self.track = Some(track);
-        let (along_m, left_m) = ahead.project(cx, cy)?;
+            .min_by(|a, b| a.0.total_cmp(&b.0))?;
+        let (along_m, left_m) = ahead.project(track.x_m, track.y_m)?;
         let (tx, ty) = ahead.tangent(along_m);
-        let toward_mps = if track.age_s >= MIN_TRACK_S {
+        let toward_mps = if track.settled() {
             -(track.vx_mps * tx + track.vy_mps * ty)
         } else {
             0.0
@@ -412,18 +304,6 @@ impl GiveWay {
             left_m,
             toward_mps,
         })
-    }
-}
-
-impl Track {
-    fn at(x_m: f64, y_m: f64) -> Self {
-        Self {
-            x_m,
-            y_m,
-            vx_mps: 0.0,
-            vy_mps: 0.0,
-            age_s: 0.0,
-        }
     }
 }
 
@@ -531,6 +411,7 @@ impl Ahead {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::movers::MoverTracker;
 
     /// Task C's corridor (y 12–14) with its cabinet (x 25.6–26.4, y 12.1–12.9): the distance to
     /// the nearest wall or cabinet face.
@@ -569,18 +450,14 @@ mod tests {
     #[test]
     fn waits_short_of_the_gap_while_someone_comes_through_it() {
         let mut gw = GiveWay::new(GiveWayConfig::default());
+        let mut tracker = MoverTracker::default();
         let (mut robot_x, mut person_x, mut person_y): (f64, f64, f64) = (29.5, 23.0, 13.3);
         let in_gap = |x: f64| (25.35..=26.65).contains(&x);
         let mut closest_wait_x = f64::INFINITY;
         for k in 0..300 {
             let pose = Pose2D::new(robot_x, 13.2, std::f64::consts::PI);
-            let hold = gw.cycle(
-                0.1,
-                pose,
-                &path_west(robot_x),
-                &person(person_x, person_y),
-                corridor,
-            );
+            tracker.update(0.1, [robot_x, 13.2], &person(person_x, person_y));
+            let hold = gw.cycle(0.1, pose, &path_west(robot_x), tracker.tracks(), corridor);
             let mut v = hold.map_or(0.7, |h| h.max_speed_mps.min(0.7));
             if hold.is_some() {
                 closest_wait_x = closest_wait_x.min(robot_x);
@@ -622,16 +499,12 @@ mod tests {
         free_m: impl Fn(f64, f64) -> f64 + Copy,
     ) -> Option<f64> {
         let mut gw = GiveWay::new(GiveWayConfig::default());
+        let mut tracker = MoverTracker::default();
         (0..cycles).map(|k| 0.1 * f64::from(k)).find(|&t| {
             let pose = robot_at(t);
-            gw.cycle(
-                0.1,
-                pose,
-                &path_west(pose.x_m),
-                &person(person_x(t), 13.3),
-                free_m,
-            )
-            .is_some()
+            tracker.update(0.1, [pose.x_m, pose.y_m], &person(person_x(t), 13.3));
+            gw.cycle(0.1, pose, &path_west(pose.x_m), tracker.tracks(), free_m)
+                .is_some()
         })
     }
 

@@ -19,6 +19,7 @@ pub mod collision_monitor;
 pub mod config;
 pub mod controllers;
 pub mod give_way;
+pub mod movers;
 pub mod node;
 pub mod recovery;
 pub mod replay;

@@ -39,13 +39,14 @@ use zenoh::handlers::RingChannel;
 use zenoh::Session;
 
 use crate::amcl::{Amcl, AmclError, Estimate, LikelihoodField, UpdateOutcome};
-use crate::collision_monitor::{self, Verdict};
+use crate::collision_monitor::{self, MovingBody, Verdict};
 use crate::config::{AgentConfig, ConfigError, ControllerKind, Limits};
 use crate::controllers::{
     Control, ControlInput, Controller, DynamicWindow, IntentionNet, IntentionNetError,
     IntentionNetOptions, PathTracker,
 };
-use crate::give_way::{GiveWay, Hold};
+use crate::give_way::GiveWay;
+use crate::movers::{self, MoverTracker};
 use crate::recovery::{Mode, Recovery};
 use crate::rotation_shim::RotationShim;
 use crate::unmapped::UnmappedObstacles;
@@ -225,6 +226,15 @@ pub struct Supervisor {
     /// Waits short of a narrow passage while someone comes through (none when off, or for the
     /// expert, which gives way by its own rule).
     give_way: Option<GiveWay>,
+    /// The walking bodies in the scan, for the give-way rule and the collision monitor.
+    movers: MoverTracker,
+    /// This cycle's walking bodies in the scan's frame, for the collision monitor.
+    moving: Vec<MovingBody>,
+    /// The held scan is newer than the tracker's last: the tracker takes each scan once (a
+    /// control cycle may come without a new one) ...
+    scan_untracked: bool,
+    /// ... over the time since the last.
+    movers_since_s: f64,
     /// What the laser sees where the floor plan is free (`None` when reporting is off).
     unmapped: Option<UnmappedObstacles>,
     /// What it reported with the last pose (map frame).
@@ -314,6 +324,10 @@ impl Supervisor {
             recovery,
             shim,
             give_way,
+            movers: MoverTracker::default(),
+            moving: Vec::new(),
+            scan_untracked: false,
+            movers_since_s: 0.0,
             unmapped,
             unmapped_seen: Vec::new(),
             last_verdict: None,
@@ -422,6 +436,7 @@ impl Supervisor {
     ) -> Result<Option<PoseEstimate>, NodeError> {
         let Some(odom) = self.odometry_at(scan.header.stamp_ns).cloned() else {
             self.scan = Some(scan);
+            self.scan_untracked = true;
             return Ok(None);
         };
         self.last_amcl = Some(self.amcl.update(&odom, Some(&scan))?);
@@ -429,10 +444,12 @@ impl Supervisor {
         let (Some(estimate), Some(pose)) = (self.amcl.estimate(), self.amcl.predict_pose(&odom))
         else {
             self.scan = Some(scan);
+            self.scan_untracked = true;
             return Ok(None);
         };
         self.unmapped_seen = self.mark_unmapped(&scan, &estimate, pose);
         self.scan = Some(scan);
+        self.scan_untracked = true;
         self.pose_seq += 1;
         if self.poses.len() == POSE_HISTORY {
             self.poses.pop_front();
@@ -462,13 +479,7 @@ impl Supervisor {
         };
         let std_m = protocol::position_std_m(&estimate.covariance);
         if std_m <= self.config.unmapped_obstacles.max_position_std_m {
-            let laser = self.config.amcl.robot_from_laser;
-            let (s, c) = estimate.pose.yaw_rad.sin_cos();
-            let map_from_laser = Pose2D::new(
-                estimate.pose.x_m + c * laser.x_m - s * laser.y_m,
-                estimate.pose.y_m + s * laser.x_m + c * laser.y_m,
-                estimate.pose.yaw_rad + laser.yaw_rad,
-            );
+            let map_from_laser = pose_compose(estimate.pose, self.config.amcl.robot_from_laser);
             let field = self.amcl.field();
             layer.on_scan(scan, map_from_laser, |x, y| field.distance_m(x, y));
         }
@@ -530,6 +541,8 @@ impl Supervisor {
         self.last_control = Some(now);
         let limits = self.config.limits;
         self.monitor = None;
+        self.moving.clear();
+        self.movers_since_s += dt;
         let (target, state, reason) = self.target(now, dt, &limits);
         let (mut v, mut w) = match target {
             // Driving: the controller's command within the acceleration limits.
@@ -549,7 +562,7 @@ impl Supervisor {
         let monitor = &self.config.safety.collision_monitor;
         if let Some(scan) = self.scan.as_ref().filter(|_| monitor.enabled) {
             if v != 0.0 {
-                let verdict = collision_monitor::check(monitor, scan, v, w);
+                let verdict = collision_monitor::check(monitor, scan, &self.moving, v, w);
                 (v, w) = (verdict.v_mps, verdict.omega_radps);
                 self.monitor = Some(verdict);
             }
@@ -604,6 +617,7 @@ impl Supervisor {
         if let Some(g) = &mut self.give_way {
             g.reset();
         }
+        self.movers.reset();
         self.recovering = false;
     }
 
@@ -689,21 +703,37 @@ impl Supervisor {
             .path
             .last()
             .map_or(f64::INFINITY, |g| g.distance_m(&pose));
-        let held = match (self.give_way.as_mut(), self.scan.as_ref()) {
-            (Some(give_way), Some(scan)) => give_way_hold(
-                give_way,
-                GiveWayInputs {
-                    scan,
+        let monitor = &self.config.safety.collision_monitor;
+        let tracking = self.give_way.is_some() || (monitor.enabled && monitor.track_movers);
+        let held = match self.scan.as_ref().filter(|_| tracking) {
+            Some(scan) => {
+                let seen = SeenInputs {
                     field: self.amcl.field(),
                     seen_m: &self.unmapped_seen,
                     cell_m: self.config.unmapped_obstacles.cell_m,
-                    robot_from_laser: self.config.amcl.robot_from_laser,
-                },
-                dt,
-                pose,
-                &intention.path,
-            ),
-            _ => None,
+                };
+                let laser = self.config.amcl.robot_from_laser;
+                let map_from_laser = pose_compose(pose, laser);
+                if std::mem::take(&mut self.scan_untracked) {
+                    let since_s = std::mem::take(&mut self.movers_since_s);
+                    let candidates = mover_candidates(
+                        &seen,
+                        scan,
+                        map_from_laser,
+                        self.config.give_way.min_map_gap_m,
+                    );
+                    self.movers
+                        .update(since_s, [pose.x_m, pose.y_m], &candidates);
+                }
+                self.moving =
+                    collision_monitor::moving_bodies(self.movers.tracks(), map_from_laser);
+                self.give_way.as_mut().and_then(|give_way| {
+                    give_way.cycle(dt, pose, &intention.path, self.movers.tracks(), |x, y| {
+                        seen.free_m(x, y)
+                    })
+                })
+            }
+            None => None,
         };
         if let Some(spot) = held.and_then(|h| h.wait_at_m) {
             self.recovery.idle(dt);
@@ -783,56 +813,66 @@ impl Supervisor {
     }
 }
 
-/// What the give-way rule looks at besides the pose and the path.
-struct GiveWayInputs<'a> {
-    scan: &'a LaserScan,
+/// What the laser's returns are measured against: the floor plan and the obstacle layer.
+struct SeenInputs<'a> {
     field: &'a LikelihoodField,
     /// The obstacle layer's confirmed cells (map frame).
     seen_m: &'a [[f64; 2]],
     cell_m: f64,
-    robot_from_laser: Pose2D,
 }
 
-/// The give-way rule's speed cap this cycle at `pose` on `path`: the laser's returns off the
-/// floor plan and off the obstacle layer's confirmed cells are the movers.
-fn give_way_hold(
-    give_way: &mut GiveWay,
-    inputs: GiveWayInputs<'_>,
-    dt: f64,
-    pose: Pose2D,
-    path: &[Pose2D],
-) -> Option<Hold> {
-    let GiveWayInputs {
-        scan,
-        field,
-        seen_m,
-        cell_m,
-        robot_from_laser: laser,
-    } = inputs;
-    let seen_gap_m = |x: f64, y: f64| {
-        seen_m
+impl SeenInputs<'_> {
+    /// Distance from (x, y) to the nearest confirmed cell's edge.
+    fn seen_gap_m(&self, x: f64, y: f64) -> f64 {
+        self.seen_m
             .iter()
-            .map(|&[sx, sy]| (sx - x).hypot(sy - y) - 0.5 * cell_m)
+            .map(|&[sx, sy]| (sx - x).hypot(sy - y) - 0.5 * self.cell_m)
             .fold(f64::INFINITY, f64::min)
-    };
-    let (s, c) = pose.yaw_rad.sin_cos();
-    let origin = (
-        pose.x_m + c * laser.x_m - s * laser.y_m,
-        pose.y_m + s * laser.x_m + c * laser.y_m,
-    );
-    let (ls, lc) = (pose.yaw_rad + laser.yaw_rad).sin_cos();
-    let movers: Vec<[f64; 2]> = (0..scan.ranges_m.len())
+    }
+
+    /// Distance from (x, y) to the nearest wall or confirmed cell.
+    fn free_m(&self, x: f64, y: f64) -> f64 {
+        self.field.distance_m(x, y).min(self.seen_gap_m(x, y))
+    }
+}
+
+/// `a` then `b`: the pose `b` (in `a`'s frame) in `a`'s parent frame.
+fn pose_compose(a: Pose2D, b: Pose2D) -> Pose2D {
+    let (s, c) = a.yaw_rad.sin_cos();
+    Pose2D::new(
+        a.x_m + c * b.x_m - s * b.y_m,
+        a.y_m + s * b.x_m + c * b.y_m,
+        a.yaw_rad + b.yaw_rad,
+    )
+}
+
+/// The laser's returns (taken at `map_from_laser`) that could be movers, in the map frame:
+/// off the floor plan's walls and off the obstacle layer's confirmed cells.
+fn mover_candidates(
+    seen: &SeenInputs<'_>,
+    scan: &LaserScan,
+    map_from_laser: Pose2D,
+    min_map_gap_m: f64,
+) -> Vec<[f64; 2]> {
+    let (ls, lc) = map_from_laser.yaw_rad.sin_cos();
+    (0..scan.ranges_m.len())
         .filter(|&i| scan.is_return(i))
         .filter_map(|i| {
             let r = f64::from(scan.ranges_m[i]);
             let (bs, bc) = f64::from(scan.beam_angle_rad(i)).sin_cos();
             let (lx, ly) = (r * bc, r * bs);
-            let (x, y) = (origin.0 + lc * lx - ls * ly, origin.1 + ls * lx + lc * ly);
-            (give_way.off_the_plan(field.distance_m(x, y), seen_gap_m(x, y))).then_some([x, y])
+            let (x, y) = (
+                map_from_laser.x_m + lc * lx - ls * ly,
+                map_from_laser.y_m + ls * lx + lc * ly,
+            );
+            movers::off_the_plan(
+                min_map_gap_m,
+                seen.field.distance_m(x, y),
+                seen.seen_gap_m(x, y),
+            )
+            .then_some([x, y])
         })
-        .collect();
-    let free_m = |x: f64, y: f64| field.distance_m(x, y).min(seen_gap_m(x, y));
-    give_way.cycle(dt, pose, path, &movers, free_m)
+        .collect()
 }
 
 /// Arrived within this of the waiting spot beside the path.

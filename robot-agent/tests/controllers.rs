@@ -339,7 +339,7 @@ impl<C: Controller> Controller for Monitored<C> {
 
     fn control(&mut self, input: &ControlInput<'_>) -> Result<Control, ControllerError> {
         let (v, w) = self.0.control(input)?.to_physical(input.limits);
-        let verdict = collision_monitor::check(&self.1, input.scan.unwrap(), v, w);
+        let verdict = collision_monitor::check(&self.1, input.scan.unwrap(), &[], v, w);
         Ok(Control {
             v_norm: verdict.v_mps / input.limits.max_speed_mps,
             omega_norm: verdict.omega_radps / input.limits.max_turn_radps,
