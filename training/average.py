@@ -160,6 +160,12 @@ def average(members: list[tuple[Path, float | None]], out: Path, card_json: Path
          "validation_loss": c["validation_loss"]}
         for (path, _), blob, w, c in zip(members, blobs, weights, cards)
     ], separators=(",", ":"))
+    # The recipe of an average is the averaging; each member's own recipe stays beside it.
+    card["recipe"] = json.dumps({
+        "method": "weighted mean of the initializers of exported models of one lineage (WiSE-FT)",
+        "weights": [round(float(w), 6) for w in weights],
+        "member_recipes": [json.loads(c["recipe"]) if c.get("recipe") else None for c in cards],
+    }, separators=(",", ":"), sort_keys=True)
     note = (f"weights: the weighted mean of {len(members)} exported models of one lineage "
             f"({', '.join(f'{float(w):g}' for w in weights)}; WiSE-FT), batch norms folded before averaging")
     card["deviations"] = "; ".join(x for x in (first_card.get("deviations"), note) if x)

@@ -136,9 +136,9 @@ def check_contract(sess: ort.InferenceSession, card: dict[str, str]) -> None:
 def closed_loop_summary(tables: list[str | Path], kind: str) -> str:
     """The card's `closed_loop`: this network's rows of `eval table` results (table.json), per
     scenario: successes/runs, interventions, collisions, time and smoothness (mean over seeds),
-    with the command that made each table."""
+    each row naming its table by its index in `tables`."""
     rows = []
-    for path in tables:
+    for i, path in enumerate(tables):
         table = json.loads(Path(path).read_text())
         for r in table["rows"]:
             if r["method"] != kind:
@@ -148,6 +148,9 @@ def closed_loop_summary(tables: list[str | Path], kind: str) -> str:
                 return None if stat is None else round(stat["mean"], digits)
 
             rows.append({
+                # Which of `tables` (a card may carry the network alone and deployed, or tasks
+                # and behaviours, from separate tables with the same scenarios).
+                "table": i,
                 "scenario": r["scenario"],
                 "success": f"{r['successes']}/{r['runs']}",
                 "interventions": mean("interventions", 2),

@@ -20,7 +20,9 @@
 # it exists), LR (1e-3; later rounds, warm-started, use LR_LATER, 3e-4), GEN_FIRST (1000: round
 # r records on buildings GEN_FIRST + (r-1) GEN.., the expert 2000 higher: never the same twice),
 # ENCOUNTER_KINDS (the scripted encounters' kinds, comma-separated, e.g. furniture,glass_door;
-# default all six).
+# default all six), KEEP_EPOCHS (1: every epoch's checkpoint comes back too, in
+# r<round>-<kind>-<backbone>-epochs<k>.tar of at most 15 MB each, at most EPOCH_MB (45) MB in
+# all, thinned evenly, the last epoch always kept: candidates to judge in closed loop).
 # The small CPU check runs it with tiny budgets (see training/README.md).
 set -euo pipefail
 
@@ -41,6 +43,8 @@ MODELS=${MODELS:-lpe:small lpe:small-spatial dlm:small-spatial}
 ENCOUNTER_KINDS=${ENCOUNTER_KINDS:-}
 kinds=(); [ -n "$ENCOUNTER_KINDS" ] && kinds=(--encounter-kinds "$ENCOUNTER_KINDS")
 ROUNDS=${ROUNDS:-1}
+KEEP_EPOCHS=${KEEP_EPOCHS:-0}
+EPOCH_MB=${EPOCH_MB:-45}
 LR_LATER=${LR_LATER:-3e-4}
 DRIVER=${DRIVER:-$(tr ' ' '\n' <<<"$MODELS" | grep '^lpe:' | head -n 1 || true)}
 CORES=$(nproc)
@@ -74,6 +78,27 @@ pack() {
     return 0
 }
 
+# Every epoch's checkpoint, in tars of at most 15 MB (the device tool returns files of up to
+# 16 MB), at most EPOCH_MB MB in all: where more were written, an even selection, the last kept.
+pack_epochs() {
+    local dir=$1 stem=$2 files=() size_mb keep step i k=0 batch=() batch_mb=0
+    mapfile -t files < <(cd "$dir" && ls checkpoint_e*.pt 2>/dev/null)
+    [ "${#files[@]}" -gt 0 ] || return 0
+    size_mb=$(( ($(stat -c %s "$dir/${files[0]}") + 1048575) / 1048576 ))
+    keep=$(( EPOCH_MB / size_mb )); [ "$keep" -ge 1 ] || keep=1
+    step=$(( (${#files[@]} + keep - 1) / keep ))
+    local chosen=()
+    for ((i = ${#files[@]} - 1; i >= 0; i -= step)); do chosen=("${files[i]}" "${chosen[@]}"); done
+    for f in "${chosen[@]}"; do
+        if [ $(( batch_mb + size_mb )) -gt 15 ] && [ "${#batch[@]}" -gt 0 ]; then
+            tar -C "$dir" -cf "$stem-epochs$k.tar" "${batch[@]}"; k=$((k + 1)); batch=(); batch_mb=0
+        fi
+        batch+=("$f"); batch_mb=$(( batch_mb + size_mb ))
+    done
+    [ "${#batch[@]}" -gt 0 ] && tar -C "$dir" -cf "$stem-epochs$k.tar" "${batch[@]}"
+    return 0
+}
+
 # One round: recordings, in parallel, each on half the cores, stopped by the wall budget at an
 # episode boundary (then exactly the recording of --samples K), then training on everything so far.
 round() {
@@ -97,7 +122,8 @@ round() {
     data+=("$dir/dagger" "$dir/expert")
 
     log "round $r: training $MODELS for $TRAIN_MIN min each on ${#data[@]} recordings, $TRAIN_WORKERS data workers each"
-    local pids=() m kind backbone speed init
+    local pids=() m kind backbone speed init keep=()
+    [ "$KEEP_EPOCHS" = 1 ] && keep=(--keep-epochs)
     for m in $MODELS; do
         kind=${m%%:*}; backbone=${m#*:}
         speed=(); [ "$kind" = lpe ] && speed=(--balance-speed)
@@ -105,7 +131,7 @@ round() {
             && init=(--init "$init_dir/$kind-$backbone/checkpoint_best.pt")
         $PY -m training.train --kind "$kind" --backbone "$backbone" --data "${data[@]}" \
             --out "$dir/train/$kind-$backbone" --minutes "$TRAIN_MIN" --batch 256 --lr "$lr" "${speed[@]}" "${init[@]}" \
-            --workers "$TRAIN_WORKERS" --threads 2 --seed "$((7 + r))" > "$LOGS/r$r-train-$kind-$backbone.log" 2>&1 &
+            --workers "$TRAIN_WORKERS" --threads 2 --seed "$((7 + r))" "${keep[@]}" > "$LOGS/r$r-train-$kind-$backbone.log" 2>&1 &
         pids+=($!)
     done
     local status=0 p
@@ -118,6 +144,7 @@ round() {
         # Each round's models leave at once, so that a call cut off by its time limit still
         # returns every finished round (the rounds are compared in closed loop afterwards).
         pack "$dir/train/$kind-$backbone" "$ROUND_OUT/r$r-$kind-$backbone.tar"
+        [ "$KEEP_EPOCHS" = 1 ] && pack_epochs "$dir/train/$kind-$backbone" "$ROUND_OUT/r$r-$kind-$backbone"
     done
     tar -C "$LOGS" -cf "$ROUND_OUT/logs.tar" .
     return "$status"

@@ -88,6 +88,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--device", default="auto", help="cpu, cuda, or auto (cuda when available)")
     p.add_argument("--max-onnx-mb", type=float, default=export.MAX_MB, help="refuse an exported model larger than this")
     p.add_argument("--no-export", action="store_true", help="skip the ONNX export at the end")
+    p.add_argument("--keep-epochs", action="store_true",
+                   help="also keep every epoch's checkpoint as checkpoint_eNN.pt: candidates to judge in closed "
+                        "loop, where validation loss does not choose (a GPU lease brings them all back)")
     p.add_argument("--init", help="start from this checkpoint's weights (same kind and architecture), e.g. "
                    "the previous DAgger round's checkpoint_best.pt; optimiser and schedule start afresh")
     args = p.parse_args(argv)
@@ -376,6 +379,8 @@ def main(argv=None) -> int:
         state = dict(common, state_dict=net.state_dict(), epoch=epoch, samples_seen=seen, steps=step,
                      train_loss=entry["train_loss"], val=val, training_minutes=minutes)
         torch.save(state, out / "checkpoint_last.pt")
+        if args.keep_epochs:
+            torch.save(state, out / f"checkpoint_e{epoch:02d}.pt")
         if is_best:
             torch.save(state, out / "checkpoint_best.pt")
         history["best_epoch"] = min(history["epochs"], key=lambda e: e["val"]["loss"])["epoch"]

@@ -12,6 +12,10 @@
 //! [--seeds N] [--models DIR] [--jobs N] [--record-dir DIR] --out DIR`: the paper's Table 1 and
 //! Figure 5 in closed loop (see [`crate::table`]).
 //!
+//! `eval compare BASE OTHER [--base-method M] [--other-method M] [--names A,B] [--json F]`: two
+//! tables (their folders or `runs.json` files) run for run, paired by scenario and seed (see
+//! [`crate::table::compare`]); prints markdown.
+//!
 //! `eval record [--scenario FILE]... [--samples N] [--noise P] [--noise-peak-radps W] [--policy MODEL --beta B]
 //! [--seed S] [--jobs N] [--image-px PX] [--every K] [--episode-s S] [--record-dir DIR] --out DIR`: the expert's
 //! demonstrations on the training scenarios as an imitation-learning dataset (see
@@ -43,6 +47,9 @@ pub enum Cmd {
     Table(TableArgs),
     /// Demonstrations of the privileged expert on the training scenarios, for imitation.
     Record(RecordArgs),
+    /// Two tables of the same scenarios and seeds, run for run: interventions per run of each,
+    /// per scenario, and the paired difference with its standard error.
+    Compare(CompareArgs),
     /// Kidnap trials on the depot map: the robot is carried away unseen; does the agent report
     /// lost localization and re-converge (lock-step)?
     Kidnap {
@@ -716,6 +723,74 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `eval compare`'s arguments.
+#[derive(Debug, clap::Args)]
+pub struct CompareArgs {
+    /// The base table: the folder `eval table --out` wrote, or its `runs.json`.
+    pub base: PathBuf,
+    /// The table compared against it.
+    pub other: PathBuf,
+    /// The base table's method, where it holds several.
+    #[arg(long)]
+    pub base_method: Option<ControllerKind>,
+    /// The other table's method, where it holds several.
+    #[arg(long)]
+    pub other_method: Option<ControllerKind>,
+    /// What to call the two tables, `BASE,OTHER` (default: their folders' names).
+    #[arg(long, value_delimiter = ',')]
+    pub names: Vec<String>,
+    /// Also write the comparison as JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+/// The runs of a table folder or `runs.json` file.
+fn read_runs(path: &std::path::Path) -> anyhow::Result<Vec<table::RunResult>> {
+    let file = if path.is_dir() {
+        path.join("runs.json")
+    } else {
+        path.to_path_buf()
+    };
+    let text =
+        std::fs::read_to_string(&file).with_context(|| format!("reading {}", file.display()))?;
+    serde_json::from_str(&text)
+        .with_context(|| format!("{}: not a table's runs.json", file.display()))
+}
+
+fn table_name(path: &std::path::Path) -> String {
+    let dir = if path.is_dir() {
+        Some(path)
+    } else {
+        path.parent()
+    };
+    dir.and_then(|d| d.file_name()).map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    )
+}
+
+fn run_compare(args: &CompareArgs) -> anyhow::Result<()> {
+    let base = read_runs(&args.base)?;
+    let other = read_runs(&args.other)?;
+    let c = table::compare::compare(&base, args.base_method, &other, args.other_method)?;
+    let (bn, on) = match args.names.as_slice() {
+        [b, o] => (b.clone(), o.clone()),
+        [] => (table_name(&args.base), table_name(&args.other)),
+        names => anyhow::bail!(
+            "--names {}: two names are needed, BASE,OTHER",
+            names.join(",")
+        ),
+    };
+    print!("{}", table::compare::markdown(&c, &bn, &on));
+    if let Some(path) = &args.json {
+        let text = serde_json::to_string_pretty(&c)?;
+        let tmp = path.with_extension("json.tmp");
+        std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
+        std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
+
 /// Runs a command.
 ///
 /// # Errors
@@ -724,6 +799,7 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
     match &cli.command {
         Cmd::Table(args) => run_table(args),
         Cmd::Record(args) => run_record(args),
+        Cmd::Compare(args) => run_compare(args),
         Cmd::Kidnap {
             map,
             trials,

@@ -92,6 +92,9 @@ def test_average() -> None:
         members = json.loads(card["averaged_from"])
         assert [m["weight"] for m in members] == [0.5, 0.5]
         assert all(len(m["sha256"]) == 64 for m in members)
+        # The card says how it was made, as a trained model's does (the agent's shipped-model test).
+        recipe = json.loads(card["recipe"])
+        assert recipe["weights"] == [0.5, 0.5] and len(recipe["member_recipes"]) == 2, recipe
         read_back = {p.key: p.value for p in onnx.load(out).metadata_props}
         assert read_back == card
         assert json.loads((tmp / "avg.card.json").read_text())["dataset_id"] == card["dataset_id"]

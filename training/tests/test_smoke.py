@@ -174,16 +174,25 @@ def check_frames_and_measures(data_dir: Path, work: Path) -> None:
 
 def check_rebuild(data_dir: Path, work: Path) -> None:
     """A warm start from an ONNX model alone (`training.from_onnx`): the rebuilt network agrees
-    with onnxruntime (the command checks it and fails otherwise), `train.py --init` takes it, and
-    a wrong backbone is refused by name."""
+    with onnxruntime (the command checks it and fails otherwise), `train.py --init` takes it (and
+    keeps each epoch's checkpoint with --keep-epochs), and a wrong backbone is refused by name."""
     rebuilt = work / "rebuilt" / "checkpoint_best.pt"
     out = run([sys.executable, "-m", "training.from_onnx", "--model", str(work / "lpe-spatial" / "lpe.onnx"),
                "--backbone", "small-spatial", "--calibrate", str(data_dir), "--samples", "128", "--out", str(rebuilt)])
     assert "max |torch - onnxruntime|" in out and rebuilt.is_file(), out
     run([sys.executable, "-m", "training.train", "--kind", "lpe", "--backbone", "small-spatial", "--data", str(data_dir),
-         "--out", str(work / "lpe-warm"), "--epochs", "1", "--threads", "1", "--init", str(rebuilt)])
+         "--out", str(work / "lpe-warm"), "--epochs", "2", "--samples-per-epoch", "128", "--threads", "1",
+         "--init", str(rebuilt), "--keep-epochs"])
     card = json.loads((work / "lpe-warm" / "card.json").read_text())
     assert "warm-started" in card["deviations"], card["deviations"]
+    # --keep-epochs: each epoch's weights, as the epoch ended, to judge in closed loop.
+    import torch
+
+    kept = sorted(p.name for p in (work / "lpe-warm").glob("checkpoint_e*.pt"))
+    assert kept == ["checkpoint_e00.pt", "checkpoint_e01.pt"], kept
+    first, last = (torch.load(work / "lpe-warm" / n, map_location="cpu", weights_only=False) for n in kept)
+    assert (first["epoch"], last["epoch"]) == (0, 1), (first["epoch"], last["epoch"])
+    assert any(not torch.equal(first["state_dict"][k], last["state_dict"][k]) for k in first["state_dict"])
     p = subprocess.run([sys.executable, "-m", "training.from_onnx", "--model", str(work / "lpe-spatial" / "lpe.onnx"),
                         "--backbone", "small", "--calibrate", str(data_dir), "--out", str(work / "wrong.pt")],
                        cwd=ROOT, capture_output=True, text=True)

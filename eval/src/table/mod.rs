@@ -7,6 +7,7 @@
 //! `table.md` and the pictures.
 
 pub mod audit;
+pub mod compare;
 pub mod judge;
 pub mod log;
 pub mod report;

@@ -1,0 +1,409 @@
+//! `eval compare`: two closed-loop tables of the same scenarios and seeds, run for run.
+//!
+//! A table is deterministic per scenario × method × seed, so two tables of the same seeds differ
+//! only by what was changed between them (a model, a flag, the code). The runs pair up by
+//! scenario and seed, and the paired difference of interventions, with its standard error over
+//! the pairs, says whether a change is larger than the spread of one table's seeds (round 11 of
+//! docs/evaluation.md: a 5-seed mean moves by about ±0.25 interventions per run from one block
+//! of seeds to the next). Plain data in, numbers and markdown out; the command reads and prints.
+
+use std::collections::BTreeMap;
+
+use protocol::ControllerKind;
+use serde::{Deserialize, Serialize};
+
+use super::report::Stat;
+use super::run::RunResult;
+
+/// Why two tables cannot be compared.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+pub enum CompareError {
+    /// A side holds several methods and none was chosen.
+    #[error("the {side} table holds the methods {methods}: choose one with --{side}-method")]
+    SeveralMethods { side: &'static str, methods: String },
+    /// The chosen method has no run on a side.
+    #[error("the {side} table has no run of method {method}")]
+    NoSuchMethod {
+        side: &'static str,
+        method: ControllerKind,
+    },
+    /// A scenario and seed appears twice on one side.
+    #[error("the {side} table has scenario {scenario} seed {seed} twice")]
+    Duplicate {
+        side: &'static str,
+        scenario: String,
+        seed: u64,
+    },
+    /// No scenario and seed is on both sides.
+    #[error("no run pairs up: the tables share no scenario and seed")]
+    NothingInCommon,
+}
+
+/// What one side's runs measured, over the runs that pair up.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Side {
+    pub method: ControllerKind,
+    pub runs: usize,
+    pub successes: usize,
+    /// Interventions per run: mean, sample standard deviation.
+    pub interventions: Stat,
+    /// Standard error of that mean.
+    pub interventions_se: f64,
+    /// Contacts summed over the runs: wall, furniture, glass, person, robot.
+    pub contacts: [u32; 5],
+    /// Mean smoothness (m/s³) over the runs that have one.
+    pub smoothness: Option<f64>,
+}
+
+/// One scenario's pairs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioPair {
+    pub scenario: String,
+    pub pairs: usize,
+    pub base_interventions: f64,
+    pub other_interventions: f64,
+    /// Mean time (s) over the runs that succeeded, each side's own.
+    pub base_time_s: Option<f64>,
+    pub other_time_s: Option<f64>,
+}
+
+/// The comparison: `other` against `base`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Comparison {
+    pub base: Side,
+    pub other: Side,
+    pub scenarios: Vec<ScenarioPair>,
+    /// Other minus base, interventions per run: mean and standard error over the pairs.
+    pub paired_mean: f64,
+    pub paired_se: f64,
+    /// Pairs where other needed fewer / more / as many interventions.
+    pub better: usize,
+    pub worse: usize,
+    pub same: usize,
+    /// Runs of either side left out because the other side has no run of that scenario and seed.
+    pub unpaired: usize,
+}
+
+type Key = (String, u64);
+
+/// The runs of one side keyed by scenario and seed, of `method` or of the one method it holds.
+fn side_runs<'a>(
+    side: &'static str,
+    runs: &'a [RunResult],
+    method: Option<ControllerKind>,
+) -> Result<(ControllerKind, BTreeMap<Key, &'a RunResult>), CompareError> {
+    let method = match method {
+        Some(m) => m,
+        None => {
+            let mut methods: Vec<ControllerKind> = runs.iter().map(|r| r.method).collect();
+            methods.sort_by_key(|m| m.to_string());
+            methods.dedup();
+            match methods.as_slice() {
+                [] => return Err(CompareError::NothingInCommon),
+                [one] => *one,
+                many => {
+                    return Err(CompareError::SeveralMethods {
+                        side,
+                        methods: many
+                            .iter()
+                            .map(ToString::to_string)
+                            .collect::<Vec<_>>()
+                            .join(", "),
+                    })
+                }
+            }
+        }
+    };
+    let mut keyed = BTreeMap::new();
+    for r in runs.iter().filter(|r| r.method == method) {
+        if keyed.insert((r.scenario.clone(), r.seed), r).is_some() {
+            return Err(CompareError::Duplicate {
+                side,
+                scenario: r.scenario.clone(),
+                seed: r.seed,
+            });
+        }
+    }
+    if keyed.is_empty() {
+        return Err(CompareError::NoSuchMethod { side, method });
+    }
+    Ok((method, keyed))
+}
+
+fn standard_error(s: &Stat) -> f64 {
+    #[allow(clippy::cast_precision_loss)]
+    let n = s.n as f64;
+    if s.n > 1 {
+        s.std / n.sqrt()
+    } else {
+        0.0
+    }
+}
+
+fn mean(values: impl Iterator<Item = f64>) -> Option<f64> {
+    let (sum, n) = values.fold((0.0, 0_u32), |(s, n), v| (s + v, n + 1));
+    (n > 0).then(|| sum / f64::from(n))
+}
+
+/// Mean time over the runs that succeeded.
+fn mean_time<'a>(runs: impl Iterator<Item = &'a RunResult>) -> Option<f64> {
+    mean(runs.filter(|r| r.success).map(|r| r.time_s))
+}
+
+fn side_of(method: ControllerKind, runs: &[&RunResult]) -> Side {
+    let interventions: Vec<f64> = runs.iter().map(|r| f64::from(r.interventions)).collect();
+    let stat = Stat::of(&interventions).unwrap_or(Stat {
+        mean: 0.0,
+        std: 0.0,
+        n: 0,
+    });
+    let mut contacts = [0_u32; 5];
+    for r in runs {
+        let c = &r.collisions;
+        for (slot, n) in contacts
+            .iter_mut()
+            .zip([c.wall, c.furniture, c.glass, c.person, c.robot])
+        {
+            *slot += n;
+        }
+    }
+    Side {
+        method,
+        runs: runs.len(),
+        successes: runs.iter().filter(|r| r.success).count(),
+        interventions_se: standard_error(&stat),
+        interventions: stat,
+        contacts,
+        smoothness: mean(runs.iter().filter_map(|r| r.smoothness)),
+    }
+}
+
+/// Pairs `other`'s runs with `base`'s by scenario and seed and measures the difference.
+///
+/// # Errors
+/// [`CompareError`] when a side's method is ambiguous or absent, a run is duplicated, or no
+/// run pairs up.
+pub fn compare(
+    base: &[RunResult],
+    base_method: Option<ControllerKind>,
+    other: &[RunResult],
+    other_method: Option<ControllerKind>,
+) -> Result<Comparison, CompareError> {
+    let (bm, b) = side_runs("base", base, base_method)?;
+    let (om, o) = side_runs("other", other, other_method)?;
+    let keys: Vec<&Key> = b.keys().filter(|k| o.contains_key(*k)).collect();
+    if keys.is_empty() {
+        return Err(CompareError::NothingInCommon);
+    }
+    let unpaired = b.len() + o.len() - 2 * keys.len();
+    let pb: Vec<&RunResult> = keys.iter().map(|k| b[*k]).collect();
+    let po: Vec<&RunResult> = keys.iter().map(|k| o[*k]).collect();
+    let diffs: Vec<f64> = pb
+        .iter()
+        .zip(&po)
+        .map(|(x, y)| f64::from(y.interventions) - f64::from(x.interventions))
+        .collect();
+    let d = Stat::of(&diffs).unwrap_or(Stat {
+        mean: 0.0,
+        std: 0.0,
+        n: 0,
+    });
+    let mut scenarios: BTreeMap<&str, Vec<(&RunResult, &RunResult)>> = BTreeMap::new();
+    for (x, y) in pb.iter().zip(&po) {
+        scenarios.entry(&x.scenario).or_default().push((x, y));
+    }
+    Ok(Comparison {
+        base: side_of(bm, &pb),
+        other: side_of(om, &po),
+        scenarios: scenarios
+            .into_iter()
+            .map(|(name, runs)| ScenarioPair {
+                scenario: name.to_string(),
+                pairs: runs.len(),
+                base_interventions: mean(runs.iter().map(|(x, _)| f64::from(x.interventions)))
+                    .unwrap_or(0.0),
+                other_interventions: mean(runs.iter().map(|(_, y)| f64::from(y.interventions)))
+                    .unwrap_or(0.0),
+                base_time_s: mean_time(runs.iter().map(|(x, _)| *x)),
+                other_time_s: mean_time(runs.iter().map(|(_, y)| *y)),
+            })
+            .collect(),
+        paired_mean: d.mean,
+        paired_se: standard_error(&d),
+        better: diffs.iter().filter(|v| **v < 0.0).count(),
+        worse: diffs.iter().filter(|v| **v > 0.0).count(),
+        same: diffs.iter().filter(|v| **v == 0.0).count(),
+        unpaired,
+    })
+}
+
+/// The comparison as markdown: a row per side, a row per scenario, and the paired difference.
+#[must_use]
+pub fn markdown(c: &Comparison, base_name: &str, other_name: &str) -> String {
+    let opt = |v: Option<f64>, d: usize| v.map_or_else(|| "–".to_string(), |v| format!("{v:.d$}"));
+    let mut s = String::from(
+        "| table | method | success | interventions per run (mean ± s.e.) | contacts w/f/g/p/r | smoothness (m/s³) |\n\
+         |---|---|---|---|---|---|\n",
+    );
+    for (name, side) in [(base_name, &c.base), (other_name, &c.other)] {
+        let k = side.contacts;
+        s.push_str(&format!(
+            "| {name} | {} | {}/{} | {:.2} ± {:.2} | {}/{}/{}/{}/{} | {} |\n",
+            side.method,
+            side.successes,
+            side.runs,
+            side.interventions.mean,
+            side.interventions_se,
+            k[0],
+            k[1],
+            k[2],
+            k[3],
+            k[4],
+            opt(side.smoothness, 2),
+        ));
+    }
+    s.push_str(&format!(
+        "\n| scenario | pairs | interventions: {base_name} | {other_name} | time (s): {base_name} | {other_name} |\n\
+         |---|---|---|---|---|---|\n"
+    ));
+    for p in &c.scenarios {
+        s.push_str(&format!(
+            "| {} | {} | {:.2} | {:.2} | {} | {} |\n",
+            p.scenario,
+            p.pairs,
+            p.base_interventions,
+            p.other_interventions,
+            opt(p.base_time_s, 0),
+            opt(p.other_time_s, 0),
+        ));
+    }
+    s.push_str(&format!(
+        "\n{other_name} − {base_name}: {:+.2} ± {:.2} interventions per run (paired, standard error over \
+         {} pairs); better in {}, worse in {}, the same in {}",
+        c.paired_mean,
+        c.paired_se,
+        c.better + c.worse + c.same,
+        c.better,
+        c.worse,
+        c.same,
+    ));
+    if c.unpaired > 0 {
+        s.push_str(&format!("; {} runs without a partner left out", c.unpaired));
+    }
+    s.push('\n');
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::table::judge::Collisions;
+
+    fn run(scenario: &str, seed: u64, method: ControllerKind, interventions: u32) -> RunResult {
+        RunResult {
+            scenario: scenario.to_string(),
+            role: "evaluation".to_string(),
+            method,
+            seed,
+            success: interventions < 30,
+            failure: None,
+            interventions,
+            intervention_log: Vec::new(),
+            collisions: Collisions {
+                glass: u32::from(interventions > 2),
+                ..Collisions::default()
+            },
+            time_s: 100.0 + f64::from(interventions),
+            smoothness: Some(1.5),
+            path_length_m: 50.0,
+            min_person_distance_m: None,
+            min_glass_distance_m: None,
+            goals_reached: 4,
+            goals_total: 4,
+            mean_position_error_m: 0.02,
+            max_position_error_m: 0.1,
+            mean_heading_error_deg: 1.0,
+            max_heading_error_deg: 3.0,
+            collision_monitor_share: None,
+            recovery_share: None,
+            recoveries: None,
+            intention_audit: None,
+            wall_s: 1.0,
+        }
+    }
+
+    #[test]
+    fn pairs_by_scenario_and_seed_and_measures_the_difference() {
+        let lpe = ControllerKind::Lpe;
+        let base: Vec<RunResult> = (0..4)
+            .flat_map(|s| {
+                [
+                    run("task_a", s, lpe, 2),
+                    run("task_b", s, lpe, u32::try_from(s).unwrap_or(0)),
+                ]
+            })
+            .collect();
+        // The other table lists its runs in another order, lacks one and has one more.
+        let mut other: Vec<RunResult> = (0..3)
+            .flat_map(|s| [run("task_b", s, lpe, 1), run("task_a", s, lpe, 1)])
+            .rev()
+            .collect();
+        other.push(run("task_c", 0, lpe, 0));
+        let c = compare(&base, None, &other, None).expect("comparable");
+        assert_eq!(c.base.runs, 6);
+        assert_eq!(c.unpaired, 2 + 1);
+        // task_a: 2 -> 1 on seeds 0..2; task_b: 0,1,2 -> 1,1,1.
+        assert_eq!((c.better, c.worse, c.same), (4, 1, 1));
+        assert!((c.paired_mean - (-3.0 + 1.0 - 1.0) / 6.0).abs() < 1e-12);
+        assert!(c.paired_se > 0.0);
+        assert_eq!(c.scenarios.len(), 2);
+        assert!((c.scenarios[0].base_interventions - 2.0).abs() < 1e-12);
+        assert!((c.scenarios[1].base_interventions - 1.0).abs() < 1e-12);
+        assert_eq!(c.base.contacts[2], 0);
+        let md = markdown(&c, "r6", "e05");
+        assert!(md.contains("e05 − r6: -0.50 ± 0.34"), "{md}");
+        assert!(md.contains("3 runs without a partner"), "{md}");
+    }
+
+    #[test]
+    fn a_table_of_several_methods_needs_a_choice() {
+        let runs = vec![
+            run("task_a", 0, ControllerKind::Lpe, 1),
+            run("task_a", 0, ControllerKind::DynamicWindow, 3),
+        ];
+        let err = compare(&runs, None, &runs, Some(ControllerKind::Lpe)).expect_err("ambiguous");
+        assert!(
+            matches!(err, CompareError::SeveralMethods { side: "base", .. }),
+            "{err}"
+        );
+        let c = compare(
+            &runs,
+            Some(ControllerKind::DynamicWindow),
+            &runs,
+            Some(ControllerKind::Lpe),
+        )
+        .expect("chosen");
+        assert_eq!((c.better, c.paired_mean), (1, -2.0));
+        assert_eq!(c.base.contacts[2], 1);
+        let err = compare(&runs, Some(ControllerKind::Dlm), &runs, None).expect_err("absent");
+        assert_eq!(err.to_string(), "the base table has no run of method dlm");
+    }
+
+    #[test]
+    fn tables_without_common_runs_are_refused() {
+        let a = vec![run("task_a", 0, ControllerKind::Lpe, 1)];
+        let b = vec![run("task_a", 1, ControllerKind::Lpe, 1)];
+        assert_eq!(
+            compare(&a, None, &b, None),
+            Err(CompareError::NothingInCommon)
+        );
+        let dup = vec![a[0].clone(), a[0].clone()];
+        assert!(matches!(
+            compare(&dup, None, &a, None),
+            Err(CompareError::Duplicate { side: "base", .. })
+        ));
+    }
+}
