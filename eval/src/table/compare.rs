@@ -12,6 +12,7 @@ use std::collections::BTreeMap;
 use protocol::ControllerKind;
 use serde::{Deserialize, Serialize};
 
+use super::judge::Collisions;
 use super::report::Stat;
 use super::run::RunResult;
 
@@ -46,12 +47,10 @@ pub struct Side {
     pub method: ControllerKind,
     pub runs: usize,
     pub successes: usize,
-    /// Interventions per run: mean, sample standard deviation.
+    /// Interventions per run: mean, sample standard deviation, runs.
     pub interventions: Stat,
-    /// Standard error of that mean.
-    pub interventions_se: f64,
-    /// Contacts summed over the runs: wall, furniture, glass, person, robot.
-    pub contacts: [u32; 5],
+    /// Contacts summed over the runs.
+    pub contacts: Collisions,
     /// Mean smoothness (m/s³) over the runs that have one.
     pub smoothness: Option<f64>,
 }
@@ -76,9 +75,8 @@ pub struct Comparison {
     pub base: Side,
     pub other: Side,
     pub scenarios: Vec<ScenarioPair>,
-    /// Other minus base, interventions per run: mean and standard error over the pairs.
-    pub paired_mean: f64,
-    pub paired_se: f64,
+    /// Other minus base, interventions per run, over the pairs.
+    pub paired: Stat,
     /// Pairs where other needed fewer / more / as many interventions.
     pub better: usize,
     pub worse: usize,
@@ -133,19 +131,17 @@ fn side_runs<'a>(
     Ok((method, keyed))
 }
 
-fn standard_error(s: &Stat) -> f64 {
-    #[allow(clippy::cast_precision_loss)]
-    let n = s.n as f64;
-    if s.n > 1 {
-        s.std / n.sqrt()
-    } else {
-        0.0
-    }
+/// Stat of the numbers; the pairs are never empty, and an empty set reads as nothing.
+fn stat(values: impl Iterator<Item = f64>) -> Stat {
+    Stat::of(&values.collect::<Vec<_>>()).unwrap_or(Stat {
+        mean: 0.0,
+        std: 0.0,
+        n: 0,
+    })
 }
 
 fn mean(values: impl Iterator<Item = f64>) -> Option<f64> {
-    let (sum, n) = values.fold((0.0, 0_u32), |(s, n), v| (s + v, n + 1));
-    (n > 0).then(|| sum / f64::from(n))
+    Stat::of(&values.collect::<Vec<_>>()).map(|s| s.mean)
 }
 
 /// Mean time over the runs that succeeded.
@@ -154,28 +150,15 @@ fn mean_time<'a>(runs: impl Iterator<Item = &'a RunResult>) -> Option<f64> {
 }
 
 fn side_of(method: ControllerKind, runs: &[&RunResult]) -> Side {
-    let interventions: Vec<f64> = runs.iter().map(|r| f64::from(r.interventions)).collect();
-    let stat = Stat::of(&interventions).unwrap_or(Stat {
-        mean: 0.0,
-        std: 0.0,
-        n: 0,
-    });
-    let mut contacts = [0_u32; 5];
+    let mut contacts = Collisions::default();
     for r in runs {
-        let c = &r.collisions;
-        for (slot, n) in contacts
-            .iter_mut()
-            .zip([c.wall, c.furniture, c.glass, c.person, c.robot])
-        {
-            *slot += n;
-        }
+        contacts.add(&r.collisions);
     }
     Side {
         method,
         runs: runs.len(),
         successes: runs.iter().filter(|r| r.success).count(),
-        interventions_se: standard_error(&stat),
-        interventions: stat,
+        interventions: stat(runs.iter().map(|r| f64::from(r.interventions))),
         contacts,
         smoothness: mean(runs.iter().filter_map(|r| r.smoothness)),
     }
@@ -206,11 +189,6 @@ pub fn compare(
         .zip(&po)
         .map(|(x, y)| f64::from(y.interventions) - f64::from(x.interventions))
         .collect();
-    let d = Stat::of(&diffs).unwrap_or(Stat {
-        mean: 0.0,
-        std: 0.0,
-        n: 0,
-    });
     let mut scenarios: BTreeMap<&str, Vec<(&RunResult, &RunResult)>> = BTreeMap::new();
     for (x, y) in pb.iter().zip(&po) {
         scenarios.entry(&x.scenario).or_default().push((x, y));
@@ -231,8 +209,7 @@ pub fn compare(
                 other_time_s: mean_time(runs.iter().map(|(_, y)| *y)),
             })
             .collect(),
-        paired_mean: d.mean,
-        paired_se: standard_error(&d),
+        paired: stat(diffs.iter().copied()),
         better: diffs.iter().filter(|v| **v < 0.0).count(),
         worse: diffs.iter().filter(|v| **v > 0.0).count(),
         same: diffs.iter().filter(|v| **v == 0.0).count(),
@@ -256,12 +233,12 @@ pub fn markdown(c: &Comparison, base_name: &str, other_name: &str) -> String {
             side.successes,
             side.runs,
             side.interventions.mean,
-            side.interventions_se,
-            k[0],
-            k[1],
-            k[2],
-            k[3],
-            k[4],
+            side.interventions.standard_error(),
+            k.wall,
+            k.furniture,
+            k.glass,
+            k.person,
+            k.robot,
             opt(side.smoothness, 2),
         ));
     }
@@ -283,8 +260,8 @@ pub fn markdown(c: &Comparison, base_name: &str, other_name: &str) -> String {
     s.push_str(&format!(
         "\n{other_name} − {base_name}: {:+.2} ± {:.2} interventions per run (paired, standard error over \
          {} pairs); better in {}, worse in {}, the same in {}",
-        c.paired_mean,
-        c.paired_se,
+        c.paired.mean,
+        c.paired.standard_error(),
         c.better + c.worse + c.same,
         c.better,
         c.worse,
@@ -300,7 +277,6 @@ pub fn markdown(c: &Comparison, base_name: &str, other_name: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::table::judge::Collisions;
 
     fn run(scenario: &str, seed: u64, method: ControllerKind, interventions: u32) -> RunResult {
         RunResult {
@@ -357,12 +333,12 @@ mod tests {
         assert_eq!(c.unpaired, 2 + 1);
         // task_a: 2 -> 1 on seeds 0..2; task_b: 0,1,2 -> 1,1,1.
         assert_eq!((c.better, c.worse, c.same), (4, 1, 1));
-        assert!((c.paired_mean - (-3.0 + 1.0 - 1.0) / 6.0).abs() < 1e-12);
-        assert!(c.paired_se > 0.0);
+        assert!((c.paired.mean - (-3.0 + 1.0 - 1.0) / 6.0).abs() < 1e-12);
+        assert!(c.paired.standard_error() > 0.0);
         assert_eq!(c.scenarios.len(), 2);
         assert!((c.scenarios[0].base_interventions - 2.0).abs() < 1e-12);
         assert!((c.scenarios[1].base_interventions - 1.0).abs() < 1e-12);
-        assert_eq!(c.base.contacts[2], 0);
+        assert_eq!(c.base.contacts.glass, 0);
         let md = markdown(&c, "r6", "e05");
         assert!(md.contains("e05 − r6: -0.50 ± 0.34"), "{md}");
         assert!(md.contains("3 runs without a partner"), "{md}");
@@ -386,8 +362,8 @@ mod tests {
             Some(ControllerKind::Lpe),
         )
         .expect("chosen");
-        assert_eq!((c.better, c.paired_mean), (1, -2.0));
-        assert_eq!(c.base.contacts[2], 1);
+        assert_eq!((c.better, c.paired.mean), (1, -2.0));
+        assert_eq!(c.base.contacts.glass, 1);
         let err = compare(&runs, Some(ControllerKind::Dlm), &runs, None).expect_err("absent");
         assert_eq!(err.to_string(), "the base table has no run of method dlm");
     }

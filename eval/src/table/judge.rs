@@ -148,6 +148,15 @@ impl Collisions {
         *slot += 1;
     }
 
+    /// Adds another run's contacts, kind by kind.
+    pub fn add(&mut self, other: &Self) {
+        self.wall += other.wall;
+        self.furniture += other.furniture;
+        self.glass += other.glass;
+        self.person += other.person;
+        self.robot += other.robot;
+    }
+
     #[must_use]
     pub fn total(&self) -> u32 {
         self.wall + self.furniture + self.glass + self.person + self.robot

@@ -43,6 +43,18 @@ impl Stat {
         })
     }
 
+    /// Standard error of the mean (0 for a single number).
+    #[must_use]
+    pub fn standard_error(&self) -> f64 {
+        #[allow(clippy::cast_precision_loss)]
+        let n = self.n as f64;
+        if self.n > 1 {
+            self.std / n.sqrt()
+        } else {
+            0.0
+        }
+    }
+
     fn show(s: Option<Self>, decimals: usize) -> String {
         s.map_or_else(
             || "–".to_string(),
