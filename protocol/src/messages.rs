@@ -699,6 +699,14 @@ pub struct AgentStatus {
     /// holding back (the agent's recovery, `[safety.recovery]`).
     #[serde(default)]
     pub recovering: bool,
+    /// The rotation shim turns the robot on the spot towards its path, which lies behind it,
+    /// before `controller` drives on (`[rotation_shim]`).
+    #[serde(default)]
+    pub rotating_in_place: bool,
+    /// The give-way rule holds the robot short of a narrow passage, or beside the path before
+    /// it, while someone comes through the passage the other way (`[give_way]`).
+    #[serde(default)]
+    pub giving_way: bool,
 }
 
 impl AgentStatus {

@@ -133,6 +133,8 @@ fn status() -> AgentStatus {
         map: Some(map_ref()),
         localized: true,
         recovering: false,
+        rotating_in_place: false,
+        giving_way: false,
     }
 }
 
@@ -256,6 +258,8 @@ fn every_status_and_task_state_round_trips() {
                 stop_reason: reason.clone(),
                 map: None,
                 recovering: state == AgentState::Driving,
+                rotating_in_place: state == AgentState::Driving,
+                giving_way: state == AgentState::Driving,
                 ..status()
             });
         }
@@ -748,6 +752,51 @@ fn unknown_fields_are_rejected() {
             ..
         })
     ));
+}
+
+/// The agent says which of its rules drives in place of the controller (the dashboard shows
+/// it); an agent built before a flag existed leaves it out, and its status still parses.
+#[test]
+fn agent_status_takeover_flags_round_trip_and_default_to_false() {
+    for (recovering, rotating_in_place, giving_way) in [
+        (false, true, false),
+        (false, false, true),
+        (true, false, false),
+        (false, true, true),
+    ] {
+        let sent = AgentStatus {
+            state: AgentState::Driving,
+            stop_reason: None,
+            recovering,
+            rotating_in_place,
+            giving_way,
+            ..status()
+        };
+        let bytes = round_trip(&sent);
+        let text = String::from_utf8(bytes).unwrap();
+        assert!(
+            text.contains(&format!("\"rotating_in_place\":{rotating_in_place}")),
+            "{text}"
+        );
+        assert!(
+            text.contains(&format!("\"giving_way\":{giving_way}")),
+            "{text}"
+        );
+    }
+
+    // A status as an agent from before the two flags encoded it.
+    let old = br#"{"wire_version":1,"kind":"status","msg":{"header":{"seq":7,"stamp_ns":1723456789823456789},"state":"driving","stop_reason":null,"controller":"lpe","map":{"name":"office_3f","version":4},"localized":true,"recovering":true}}"#;
+    let parsed: AgentStatus = decode(old).unwrap();
+    assert!(parsed.recovering);
+    assert!(!parsed.rotating_in_place);
+    assert!(!parsed.giving_way);
+    assert_eq!(parsed.state, AgentState::Driving);
+    assert_eq!(parsed.controller, ControllerKind::Lpe);
+
+    // And from before `recovering` too.
+    let older = br#"{"wire_version":1,"kind":"status","msg":{"header":{"seq":7,"stamp_ns":1723456789823456789},"state":"idle","stop_reason":null,"controller":"dlm","map":null,"localized":false}}"#;
+    let parsed: AgentStatus = decode(older).unwrap();
+    assert!(!parsed.recovering && !parsed.rotating_in_place && !parsed.giving_way);
 }
 
 /// The wire fuzzer's seed corpus (`fuzz/seeds/wire_decode`) is these fixtures as the codec

@@ -14,7 +14,8 @@
 //! - checks every command against the laser scan ([`crate::collision_monitor`]) and, when the
 //!   monitor keeps holding the controller back, lets the dynamic window drive round the
 //!   obstacle for a while ([`crate::recovery`]);
-//! - publishes [`AgentStatus`] at `status_rate_hz` and on every state change;
+//! - publishes [`AgentStatus`] at `status_rate_hz` and on every change of state, and whenever
+//!   the dynamic window, the rotation shim or the give-way rule takes over or hands back;
 //! - with [`NodeOptions::record`], records what it receives (odometry, scans, intentions, the
 //!   camera when asked) and publishes (poses, commands) as a run log (`fleet-log`, MCAP) on a
 //!   background thread, in the order it processed them.
@@ -200,10 +201,10 @@ pub struct Decision {
     /// collision monitor had held in front of an obstacle ([`crate::recovery`]).
     pub recovering: bool,
     /// The rotation shim turned the robot towards its path this cycle
-    /// ([`crate::rotation_shim`]).
+    /// ([`crate::rotation_shim`]; the status's `rotating_in_place`).
     pub rotating: bool,
     /// The robot waits short of a narrow passage for someone coming through it
-    /// ([`crate::give_way`]).
+    /// ([`crate::give_way`]; the status's `giving_way`).
     pub giving_way: bool,
 }
 
@@ -586,13 +587,11 @@ impl Supervisor {
             }
         }
         let recovering = self.recovering && state == AgentState::Driving;
-        let rotating =
-            state == AgentState::Driving && self.shim.as_ref().is_some_and(RotationShim::turning);
-        let giving_way =
-            state == AgentState::Driving && self.give_way.as_ref().is_some_and(GiveWay::waiting);
         self.cmd_v_mps = v;
         self.cmd_omega_radps = w;
         self.state = state;
+        let rotating = self.rotating();
+        let giving_way = self.giving_way();
         self.stop_reason.clone_from(&reason);
         Decision {
             cmd_v_mps: v,
@@ -632,6 +631,20 @@ impl Supervisor {
     #[must_use]
     pub fn recoveries(&self) -> u32 {
         self.recovery.recoveries()
+    }
+
+    /// Whether the rotation shim turns the robot on the spot now ([`Decision::rotating`]; only
+    /// while driving: a stop ends the turn).
+    #[must_use]
+    pub fn rotating(&self) -> bool {
+        self.state == AgentState::Driving && self.shim.as_ref().is_some_and(RotationShim::turning)
+    }
+
+    /// Whether the give-way rule holds the robot now ([`Decision::giving_way`]; only while
+    /// driving: a stop ends the wait).
+    #[must_use]
+    pub fn giving_way(&self) -> bool {
+        self.state == AgentState::Driving && self.give_way.as_ref().is_some_and(GiveWay::waiting)
     }
 
     /// The controller that drives now: the configured one, or the dynamic window recovering.
@@ -809,6 +822,8 @@ impl Supervisor {
             map: Some(self.map.clone()),
             localized: self.localized(),
             recovering: self.recovering,
+            rotating_in_place: self.rotating(),
+            giving_way: self.giving_way(),
         }
     }
 }
@@ -1045,6 +1060,8 @@ async fn run_in_session(
         map: None,
         localized: false,
         recovering: false,
+        rotating_in_place: false,
+        giving_way: false,
     };
     protocol::zenoh_io::publish(&status_pub, &starting).await?;
     tracing::info!(robot = %robot_id, site = %site, map = %map_name, controller = %config.controller, "agent starting");
@@ -1116,6 +1133,8 @@ async fn run_in_session(
     let mut cmd_seq = 0u64;
     let mut published: (AgentState, Option<StopReason>) = (AgentState::Starting, None);
     let mut published_recovering = false;
+    // What the last published status said of the rotation shim and the give-way rule.
+    let mut published_takeover = (false, false);
 
     loop {
         tokio::select! {
@@ -1207,12 +1226,18 @@ async fn run_in_session(
                         tracing::info!(controller = %agent.active_controller(), "recovered: handed back");
                     }
                 }
-                // The status says whether it is recovering, so a hand-over is news too.
-                if condition_changed || decision.recovering != published_recovering {
+                let takeover = (decision.rotating, decision.giving_way);
+                // The status says whether it is recovering, turning in place or giving way, so
+                // each hand-over is news too (the operator sees why the robot stands or turns).
+                if condition_changed
+                    || decision.recovering != published_recovering
+                    || takeover != published_takeover
+                {
                     status_seq += 1;
                     protocol::zenoh_io::publish(&status_pub, &agent.status(status_seq, clock.stamp_ns(now))).await?;
                     published = (decision.state, decision.stop_reason);
                     published_recovering = decision.recovering;
+                    published_takeover = takeover;
                 }
             }
             _ = status_tick.tick() => {

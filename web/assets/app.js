@@ -670,6 +670,7 @@ function renderRobots() {
       dot.title = r.online ? 'online' : 'offline';
       setText(tr.cells[0].querySelector('.name'), `${r.id}${r.online ? '' : ' (offline)'}`);
       setText(tr.cells[1], controllerText(r.status));
+      tr.dataset.takeover = r.online ? takeoverFlags(r.status) : '';
       setText(tr.cells[2], statusText(r));
       setText(tr.cells[3], r.task_id || '—');
       setText(tr.cells[4], ago(r.last_seen_ns));
@@ -677,10 +678,33 @@ function renderRobots() {
   );
 }
 
-// The configured controller; while the agent recovers, the dynamic window drives instead.
+// The agent's rules that drive in place of its controller for a while, by their status flags:
+// the dynamic window recovering, the rotation shim turning the robot towards a path behind it,
+// the give-way rule holding it short of a narrow passage. Older agents send no flag: none shown.
+const TAKEOVERS = [
+  ['recovering', 'recovering'],
+  ['rotating_in_place', 'turning in place'],
+  ['giving_way', 'giving way'],
+];
+
+function takeovers(status) {
+  return status ? TAKEOVERS.filter(([flag]) => status[flag] === true) : [];
+}
+
+// The configured controller, and which rule drives in its place; while the agent recovers, the
+// dynamic window drives instead.
 function controllerText(status) {
   if (!status) return '—';
-  return status.recovering ? `${status.controller} → dynamic-window (recovering)` : status.controller;
+  const base = status.recovering ? `${status.controller} → dynamic-window` : status.controller;
+  const notes = takeovers(status).map(([, text]) => text);
+  return notes.length ? `${base} (${notes.join(', ')})` : base;
+}
+
+// The same flags for tests and styling: space-separated flag names, '' when the controller drives.
+function takeoverFlags(status) {
+  return takeovers(status)
+    .map(([flag]) => flag)
+    .join(' ');
 }
 
 function taskStateText(task) {
@@ -812,6 +836,7 @@ function renderPanel() {
   setText(q('sel-status'), statusText(robot));
   setText(q('sel-stop-reason'), formatStopReason(robot.status && robot.status.stop_reason));
   setText(q('sel-controller'), controllerText(robot.status));
+  q('sel-controller').dataset.takeover = robot.online ? takeoverFlags(robot.status) : '';
   setText(q('sel-task'), robot.task_id || '—');
   setText(q('sel-map'), robot.map ? `${robot.map.name} v${robot.map.version}` : '—');
   const p = robot.pose;

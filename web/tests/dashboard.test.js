@@ -264,6 +264,17 @@ test('a task made by clicking two goals gets a robot driving', { timeout: 120_00
   const panel = page.getByTestId('robot-panel');
   await waitFor('panel shows the robot', async () => (await panel.getByTestId('sel-id').innerText()) === robotId);
   assert.match(await panel.getByTestId('sel-task').innerText(), new RegExp(task.id));
+  // The controller names the agent's rule that drives in its place exactly when the status's
+  // flag for it is set (both read in one go: one render writes them).
+  const [controllerText, takeover] = await panel
+    .getByTestId('sel-controller')
+    .evaluate((dd) => [dd.innerText, dd.dataset.takeover]);
+  const flags = takeover ? takeover.split(' ') : [];
+  const configured = (await api(`api/v1/robots/${robotId}`)).status.controller;
+  assert.ok(controllerText.startsWith(configured), `controller shown: ${controllerText}, configured: ${configured}`);
+  for (const [flag, words] of [['recovering', 'recovering'], ['rotating_in_place', 'turning in place'], ['giving_way', 'giving way']]) {
+    assert.equal(controllerText.includes(words), flags.includes(flag), `controller shown: ${controllerText}, flags: ${takeover}`);
+  }
   for (const testid of ['lpe-image', 'camera-image']) {
     await waitFor(
       `${testid} loaded`,

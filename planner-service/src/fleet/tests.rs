@@ -62,6 +62,8 @@ fn status(localized: bool) -> AgentStatus {
         map: None,
         localized,
         recovering: false,
+        rotating_in_place: false,
+        giving_way: false,
     }
 }
 

@@ -278,6 +278,13 @@ pub struct StatusView {
     /// The dynamic window drives in place of `controller` (the agent's recovery).
     #[serde(default)]
     pub recovering: bool,
+    /// The agent's rotation shim turns the robot on the spot towards its path.
+    #[serde(default)]
+    pub rotating_in_place: bool,
+    /// The agent's give-way rule holds the robot short of a narrow passage while someone comes
+    /// through it.
+    #[serde(default)]
+    pub giving_way: bool,
 }
 
 impl From<&AgentStatus> for StatusView {
@@ -288,6 +295,8 @@ impl From<&AgentStatus> for StatusView {
             controller: s.controller,
             localized: s.localized,
             recovering: s.recovering,
+            rotating_in_place: s.rotating_in_place,
+            giving_way: s.giving_way,
         }
     }
 }

@@ -206,13 +206,15 @@ fn schemas() -> Value {
             }
         },
         "RobotStatus": {
-            "type": "object", "required": ["state", "stop_reason", "controller", "localized", "recovering"],
+            "type": "object", "required": ["state", "stop_reason", "controller", "localized", "recovering", "rotating_in_place", "giving_way"],
             "properties": {
                 "state": { "type": "string", "enum": ["starting", "idle", "driving", "stopping", "stopped", "relocalizing"] },
                 "stop_reason": { "oneOf": [r("StopReason"), { "type": "null" }] },
                 "controller": { "type": "string", "enum": ["dlm", "lpe", "none", "path-tracker", "dynamic-window"] },
                 "localized": { "type": "boolean" },
-                "recovering": { "type": "boolean", "description": "the dynamic window drives in place of controller, which the collision monitor kept holding back" }
+                "recovering": { "type": "boolean", "description": "the dynamic window drives in place of controller, which the collision monitor kept holding back" },
+                "rotating_in_place": { "type": "boolean", "description": "the rotation shim turns the robot on the spot towards its path before controller drives on" },
+                "giving_way": { "type": "boolean", "description": "the give-way rule holds the robot short of a narrow passage while someone comes through it the other way" }
             }
         },
         "Intention": {

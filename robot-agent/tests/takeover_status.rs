@@ -1,0 +1,298 @@
+//! The supervisor in lock step with the simulator, without Zenoh: its decision, and the status
+//! the node publishes from it, say when the rotation shim turns the robot on the spot and when
+//! the give-way rule holds it short of a narrow passage (what the dashboard shows the operator).
+//!
+//! The loop is `eval table`'s in small: the world steps, the supervisor takes the odometry and
+//! the scan, and a fixed path, from the point nearest the robot on, answers every pose it
+//! publishes, as the planner would.
+
+// Test helpers panic on broken setup: that is the failure report.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use std::f64::consts::PI;
+use std::time::{Duration, Instant};
+
+use map_core::ImportLimits;
+use protocol::{
+    normalize_angle, AgentState, AgentStatus, Dlm, Header, Intention, MapName, MapRef, Pose2D,
+    TaskId,
+};
+use robot_agent::node::Decision;
+use robot_agent::{make_controller, AgentConfig, ControllerKind, Supervisor};
+use sim::scenario::{PersonSpec, PointSpec, PoseSpec};
+use sim::{Command, Scenario, SimConfig, World};
+use test_support::scenario;
+
+/// One control cycle (the agent's 10 Hz).
+const DT_S: f64 = 0.1;
+
+/// What one cycle gave: the decision, the status the node would publish after it, and where the
+/// robot truly was.
+struct Cycle {
+    decision: Decision,
+    status: AgentStatus,
+    truth: Pose2D,
+}
+
+/// A world with one robot at `start` and the agent's supervisor (path tracker) driving it along
+/// `path`.
+struct Run {
+    world: World,
+    supervisor: Supervisor,
+    map: MapRef,
+    path: Vec<Pose2D>,
+    epoch: Instant,
+    cmd: Command,
+}
+
+impl Run {
+    /// `name`'s scenario with the robot at `start` and `people` instead of the scenario's.
+    fn new(name: &str, start: Pose2D, people: Vec<PersonSpec>, path: Vec<Pose2D>) -> Self {
+        let file = scenario(name);
+        let mut spec = Scenario::load(&file).unwrap();
+        spec.start = PoseSpec {
+            x_m: start.x_m,
+            y_m: start.y_m,
+            yaw_rad: start.yaw_rad,
+        };
+        spec.people = people;
+        spec.parked_robots.clear();
+        let plan = map_core::load_ros_map(&spec.floor_plan_path(&file), &ImportLimits::default())
+            .unwrap()
+            .grid;
+        let mut world = World::new(spec, plan, SimConfig::default()).unwrap();
+        world.add_robots_at_start(1).unwrap();
+        let mut config = AgentConfig {
+            controller: ControllerKind::PathTracker,
+            ..AgentConfig::default()
+        };
+        // The operator places the robot and tells the agent where.
+        config.localization.initial_pose = Some(start);
+        let map = MapRef {
+            name: MapName::new("plan").unwrap(),
+            version: 1,
+        };
+        let controller = make_controller(&config).unwrap();
+        // The floor plan with the furniture drawn in: a narrow passage is narrow on the agent's
+        // map from the start, rather than once the obstacle layer has confirmed the furniture.
+        let supervisor =
+            Supervisor::new(config, map.clone(), &world.ground_truth_grid(), controller).unwrap();
+        Self {
+            world,
+            supervisor,
+            map,
+            path,
+            epoch: Instant::now(),
+            cmd: Command::default(),
+        }
+    }
+
+    /// Steps the world by one cycle, feeds the agent and executes its command.
+    fn cycle(&mut self) -> Cycle {
+        let obs = self.world.step(&[self.cmd], DT_S);
+        let now = self.epoch + Duration::from_nanos(obs.time_ns);
+        let o = &obs.robots[0];
+        self.supervisor.on_odometry(o.odom.clone());
+        let published = self
+            .supervisor
+            .on_scan(o.scan.clone(), now, obs.time_ns)
+            .unwrap();
+        if let Some(pose) = published {
+            // The planner's answer: the path from the point nearest the published pose on, as
+            // a planner replanning from the robot sends it (the agent looks for the robot only
+            // near a path's start, so a path left behind would lie behind the robot).
+            let nearest = self
+                .path
+                .iter()
+                .enumerate()
+                .min_by(|a, b| {
+                    a.1.distance_m(&pose.pose)
+                        .total_cmp(&b.1.distance_m(&pose.pose))
+                })
+                .map_or(0, |(i, _)| i);
+            let intention = Intention {
+                header: Header::new(pose.header.seq, obs.time_ns),
+                task_id: Some(TaskId::new("t-000001").unwrap()),
+                goal_index: 0,
+                answers_pose_seq: pose.header.seq,
+                answers_pose_stamp_ns: pose.header.stamp_ns,
+                map: self.map.clone(),
+                path: self.path[nearest..].to_vec(),
+                dlm: Dlm::GoForward,
+                lpe: None,
+            };
+            self.supervisor.on_intention(intention).unwrap();
+        }
+        let decision = self.supervisor.control(now);
+        self.cmd = Command {
+            v_mps: decision.cmd_v_mps,
+            omega_radps: decision.cmd_omega_radps,
+        };
+        let status = self.supervisor.status(obs.time_ns, obs.time_ns);
+        Cycle {
+            decision,
+            status,
+            truth: o.ground_truth_pose,
+        }
+    }
+}
+
+/// The indices of the cycles whose decision says `what`.
+fn cycles_where(cycles: &[Cycle], what: impl Fn(&Decision) -> bool) -> Vec<usize> {
+    cycles
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| what(&c.decision))
+        .map(|(k, _)| k)
+        .collect()
+}
+
+/// The decision's flags and the status's agree, and hold only while driving.
+fn check_consistent(k: usize, c: &Cycle) {
+    let d = &c.decision;
+    assert_eq!(
+        (c.status.rotating_in_place, c.status.giving_way),
+        (d.rotating, d.giving_way),
+        "cycle {k}: the status says other than the decision"
+    );
+    assert!(
+        d.state == AgentState::Driving || (!d.rotating && !d.giving_way),
+        "cycle {k}: {:?} with the shim or the give-way rule acting",
+        d.state
+    );
+}
+
+/// The corridor of the behaviour scenarios (about 2.4 m wide): the robot faces east, the path leads
+/// west. The shim turns it on the spot, the decision and the status say so, and once it faces
+/// the path they stop saying so and the path tracker drives it west.
+#[test]
+fn a_robot_facing_away_from_its_path_reports_turning_in_place() {
+    let start = Pose2D::new(12.0, 5.2, 0.0);
+    let path: Vec<Pose2D> = (0..=40)
+        .map(|i| Pose2D::new(12.0 - 0.2 * f64::from(i), 5.2, PI))
+        .collect();
+    let mut run = Run::new("behaviour_person_oncoming", start, Vec::new(), path);
+    let cycles: Vec<Cycle> = (0..100).map(|_| run.cycle()).collect();
+    for (k, c) in cycles.iter().enumerate() {
+        check_consistent(k, c);
+        assert!(!c.decision.giving_way, "cycle {k}: nobody to give way to");
+    }
+    let turning = cycles_where(&cycles, |d| d.rotating);
+    let first = *turning.first().expect("the shim never turned the robot");
+    let last = *turning.last().unwrap();
+    assert!(first <= 5, "turning from the start, first at cycle {first}");
+    let c = &cycles[first];
+    assert_eq!(c.decision.state, AgentState::Driving);
+    assert!(c.status.rotating_in_place, "the status says it turns");
+    assert!(!c.status.giving_way && !c.status.recovering);
+    // On the spot: no forward speed in any cycle it turns, and it does turn.
+    for (k, c) in cycles.iter().enumerate().take(last + 1).skip(first) {
+        let d = &c.decision;
+        if !d.rotating {
+            continue;
+        }
+        assert!(
+            d.cmd_v_mps.abs() < 1e-9,
+            "cycle {k}: drives at {}",
+            d.cmd_v_mps
+        );
+    }
+    assert!(
+        cycles[first..=last]
+            .iter()
+            .any(|c| c.decision.cmd_omega_radps.abs() > 0.3),
+        "the shim turned the robot"
+    );
+    // Handed back facing the path; the path tracker takes it west.
+    assert!(last + 10 < cycles.len(), "still turning at cycle {last}");
+    let end = &cycles[cycles.len() - 1];
+    assert!(!end.decision.rotating && !end.status.rotating_in_place);
+    assert_eq!(end.decision.state, AgentState::Driving);
+    assert!(
+        normalize_angle(end.truth.yaw_rad - PI).abs() < 0.5,
+        "faces west: {:?}",
+        end.truth
+    );
+    assert!(end.truth.x_m < 11.0, "drove west: {:?}", end.truth);
+}
+
+/// Task C's corridor (y 12–14), narrowed to 1.1 m beside the cabinet at x 25.6–26.4: the robot
+/// drives west towards the gap while a person comes east through it. The give-way rule holds the
+/// robot short of the gap, the decision and the status say so, and once the person is through
+/// they stop saying so and the robot drives on.
+#[test]
+fn a_robot_held_short_of_a_narrow_passage_reports_giving_way() {
+    let start = Pose2D::new(29.5, 13.2, PI);
+    // As the give-way rule's own tests: west along the corridor, through the gap's middle.
+    let path: Vec<Pose2D> = (0..80)
+        .map(|i| {
+            let x = 29.5 - 0.2 * f64::from(i);
+            let y = if (24.8..=27.2).contains(&x) {
+                13.45
+            } else {
+                13.2
+            };
+            Pose2D::new(x, y, PI)
+        })
+        .collect();
+    let person = PersonSpec {
+        route: vec![
+            PointSpec {
+                x_m: 22.0,
+                y_m: 13.3,
+            },
+            PointSpec {
+                x_m: 33.0,
+                y_m: 13.3,
+            },
+        ],
+        speed_mps: 0.6,
+        mode: sim::scenario::RouteMode::PingPong,
+        radius_m: 0.25,
+        shirt_color: [180, 40, 40],
+        pants_color: [45, 45, 60],
+    };
+    let mut run = Run::new("task_c", start, vec![person], path);
+    let cycles: Vec<Cycle> = (0..400).map(|_| run.cycle()).collect();
+    for (k, c) in cycles.iter().enumerate() {
+        check_consistent(k, c);
+    }
+    let waiting = cycles_where(&cycles, |d| d.giving_way);
+    let first = *waiting
+        .first()
+        .expect("the give-way rule never held the robot");
+    let last = *waiting.last().unwrap();
+    assert!(first > 0, "nobody in sight at the start");
+    let c = &cycles[first];
+    assert_eq!(c.decision.state, AgentState::Driving);
+    assert!(c.status.giving_way, "the status says it gives way");
+    assert!(!c.status.rotating_in_place && !c.status.recovering);
+    // Held short of the gap (it starts at x 26.4), and standing at some point of the wait.
+    let closest_x_m = cycles[first..=last]
+        .iter()
+        .map(|c| c.truth.x_m)
+        .fold(f64::INFINITY, f64::min);
+    assert!(
+        closest_x_m > 26.4 + 0.5,
+        "waited in or at the gap: {closest_x_m}"
+    );
+    assert!(
+        cycles[first..=last]
+            .iter()
+            .any(|c| c.decision.cmd_v_mps.abs() < 0.05),
+        "it stood to wait"
+    );
+    // The person came through; the robot drives on and says so.
+    let end = &cycles[cycles.len() - 1];
+    assert!(last + 10 < cycles.len(), "still giving way at cycle {last}");
+    assert!(!end.decision.giving_way && !end.status.giving_way);
+    // Drives on west after the wait (how fast it then gets through is the controller's, and
+    // the collision monitor's, not the rule's).
+    let released = &cycles[last + 1];
+    assert!(
+        end.truth.x_m < released.truth.x_m - 0.3,
+        "went on west after the wait: from {:?} to {:?}",
+        released.truth,
+        end.truth
+    );
+}
