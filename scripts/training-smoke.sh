@@ -25,3 +25,4 @@ fi
 "$PY" training/tests/test_smoke.py --seconds "$secs"
 "$PY" training/tests/test_activations.py
 "$PY" training/tests/test_average.py
+"$PY" training/tests/test_init_camera.py

@@ -93,10 +93,31 @@ def parse_args(argv=None) -> argparse.Namespace:
                         "loop, where validation loss does not choose (a GPU lease brings them all back)")
     p.add_argument("--init", help="start from this checkpoint's weights (same kind and architecture), e.g. "
                    "the previous DAgger round's checkpoint_best.pt; optimiser and schedule start afresh")
+    p.add_argument("--init-camera", help="start the camera backbone only from this checkpoint's camera backbone "
+                   "(any kind, the same --backbone), e.g. LPE-Net's for a new DLM-Net; the rest starts fresh")
     args = p.parse_args(argv)
+    if args.init and args.init_camera:
+        p.error("--init and --init-camera exclude each other (--init already loads the camera)")
     if args.backbone == "resnet50" and args.max_onnx_mb < 200:
         p.error("a ResNet-50 model is ~95 MB in ONNX (two for --lpe-branch separate); pass --max-onnx-mb 200 or more")
     return args
+
+
+def load_camera(net: torch.nn.Module, config: dict, path: str) -> tuple[str, str | None]:
+    """Loads the camera backbone of checkpoint `path` (any kind, the same backbone) into `net`'s
+    camera; returns the checkpoint's resolved path and its dataset id. A camera that learned
+    corridors, doors and people for one network is a better start for another kind's than
+    random weights: the image is the same, only what is made of it differs."""
+    init = torch.load(path, map_location="cpu", weights_only=False)
+    theirs = init.get("model_config") or {}
+    if theirs.get("backbone", "small") != config["backbone"]:
+        raise SystemExit(f"--init-camera {path}: its backbone {theirs.get('backbone', 'small')!r} "
+                         f"is not --backbone {config['backbone']!r}")
+    camera = {k.removeprefix("camera."): v for k, v in init["state_dict"].items() if k.startswith("camera.")}
+    if not camera:
+        raise SystemExit(f"--init-camera {path}: the checkpoint has no camera backbone")
+    net.camera.load_state_dict(camera)  # strict: every weight of the camera, nothing else
+    return str(Path(path).resolve()), init.get("card_inputs", {}).get("dataset_id")
 
 
 def seed_everything(seed: int) -> None:
@@ -273,6 +294,8 @@ def main(argv=None) -> int:
         net.load_state_dict(init["state_dict"])
         r["init"] = str(Path(args.init).resolve())
         r["init_datasets"] = init.get("card_inputs", {}).get("dataset_id")
+    if args.init_camera:
+        r["init_camera"], r["init_datasets"] = load_camera(net, config, args.init_camera)
     net = net.to(device, memory_format=torch.channels_last)
     n_params = model.count_parameters(net)
     camera_px, lpe_px = pool.camera_px[0], pool.lpe_px[0]
@@ -293,6 +316,9 @@ def main(argv=None) -> int:
     if args.init:
         deviations.append(f"warm-started from the weights of {args.init} (an earlier round, trained on "
                           f"dataset {r['init_datasets']}), as a DAgger round retrains the learner")
+    if args.init_camera:
+        deviations.append(f"camera backbone warm-started from the camera backbone of {args.init_camera} "
+                          f"(trained on dataset {r['init_datasets']}); intention, heads and the rest from scratch")
 
     if r["balance"]:
         w, cells = data.balance_weights(pool.dlm[train_idx], pool.label[train_idx],
