@@ -767,8 +767,12 @@ impl Supervisor {
                 .iter()
                 .map(|&[x, y]| (x - pose.x_m).hypot(y - pose.y_m))
                 .fold(f64::INFINITY, f64::min);
+            let ahead_m = self
+                .scan
+                .as_ref()
+                .map_or(f64::INFINITY, crate::recovery::ahead_m);
             self.recovery
-                .drive(dt, pose, goal_m, self.last_verdict, unmapped_m)
+                .drive(dt, pose, goal_m, self.last_verdict, unmapped_m, ahead_m)
         } else {
             Mode::Primary
         };

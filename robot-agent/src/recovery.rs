@@ -35,11 +35,21 @@
 //! [`RecoveryConfig::beside_stall_s`] is relieved. The layer has no glass in it (the laser sees
 //! through glass), so a network standing before a glass door is still left alone.
 //!
+//! A fourth trigger: cornered. DLM-Net, told only `turn_left` or `go_forward`, takes a maze's
+//! hairpin too wide, ends up facing a wall half a metre away and stands there creeping at
+//! 0.01–0.03 m/s, the monitor never holding it: 10 to 13 "no progress" interventions per run
+//! of task E, in front of the floor plan's own walls (2026-11-28). A controller that keeps the
+//! robot within [`STILL_M`] of one spot and [`STILL_RAD`] of one heading for
+//! [`RecoveryConfig::cornered_stall_s`] while the laser sees something within
+//! [`RecoveryConfig::cornered_m`] straight ahead ([`ahead_m`]) is relieved. Turning on the spot
+//! is not cornered, and glass does not count: the laser sees through it, so a network standing
+//! before a shut glass door sees the room behind and is still left alone.
+//!
 //! Plain data in (cycle length, pose, distance to the goal, what the monitor did to the last
-//! command, how far the nearest reported obstacle is), the mode out; the
+//! command, how far the nearest reported obstacle is, how far the laser sees ahead), the mode out; the
 //! [`Supervisor`](crate::Supervisor) switches controllers by it.
 
-use protocol::Pose2D;
+use protocol::{normalize_angle, LaserScan, Pose2D};
 
 use crate::collision_monitor::Verdict;
 use crate::config::ConfigError;
@@ -70,11 +80,42 @@ pub struct RecoveryConfig {
     /// ... a controller that keeps the robot within [`STILL_M`] of one spot for this long is
     /// relieved too.
     pub beside_stall_s: f64,
+    /// With something the laser sees this close straight ahead (laser to return, [`ahead_m`]) ...
+    pub cornered_m: f64,
+    /// ... a controller that keeps the robot within [`STILL_M`] and [`STILL_RAD`] of one pose
+    /// for this long is relieved too.
+    pub cornered_stall_s: f64,
 }
 
 /// How far the robot must move from where it stood to count as moving on, for
 /// [`RecoveryConfig::beside_stall_s`].
 pub const STILL_M: f64 = 0.1;
+
+/// How far the robot may turn from where it stood and still count as standing, for
+/// [`RecoveryConfig::cornered_stall_s`]: turning on the spot is doing something, but a
+/// network dithering left and right before a wall swings its heading by ~0.5 rad (task E,
+/// 2026-11-28) and goes nowhere.
+pub const STILL_RAD: f64 = 0.6;
+
+/// Half the width of the laser's view that counts as straight ahead, for [`ahead_m`].
+pub const AHEAD_HALF_ANGLE_RAD: f64 = 0.26;
+
+/// The nearest laser return within [`AHEAD_HALF_ANGLE_RAD`] of straight ahead, in metres from
+/// the laser (infinite: none; returns outside the scan's valid range are skipped).
+#[must_use]
+pub fn ahead_m(scan: &LaserScan) -> f64 {
+    scan.ranges_m
+        .iter()
+        .enumerate()
+        .filter(|&(i, &r)| {
+            r.is_finite()
+                && r >= scan.range_min_m
+                && r < scan.range_max_m
+                && f64::from(scan.beam_angle_rad(i)).abs() <= AHEAD_HALF_ANGLE_RAD
+        })
+        .map(|(_, &r)| f64::from(r))
+        .fold(f64::INFINITY, f64::min)
+}
 
 /// What counts as coming closer to the goal, for [`RecoveryConfig::approach_stall_s`].
 pub const APPROACH_PROGRESS_M: f64 = 0.1;
@@ -91,6 +132,8 @@ impl Default for RecoveryConfig {
             approach_stall_s: 3.0,
             beside_m: 0.8,
             beside_stall_s: 3.0,
+            cornered_m: 0.9,
+            cornered_stall_s: 3.0,
         }
     }
 }
@@ -110,6 +153,8 @@ impl RecoveryConfig {
             ("safety.recovery.approach_stall_s", self.approach_stall_s),
             ("safety.recovery.beside_m", self.beside_m),
             ("safety.recovery.beside_stall_s", self.beside_stall_s),
+            ("safety.recovery.cornered_m", self.cornered_m),
+            ("safety.recovery.cornered_stall_s", self.cornered_stall_s),
         ])
     }
 }
@@ -138,6 +183,8 @@ pub struct Recovery {
     approach: Option<(f64, f64)>,
     /// Where the robot has stood (within [`STILL_M`]), and since when.
     still: Option<(Pose2D, f64)>,
+    /// The pose the robot has held (within [`STILL_M`] and [`STILL_RAD`]), and since when.
+    posed: Option<(Pose2D, f64)>,
 }
 
 impl Recovery {
@@ -151,6 +198,7 @@ impl Recovery {
             recoveries: 0,
             approach: None,
             still: None,
+            posed: None,
         }
     }
 
@@ -177,12 +225,14 @@ impl Recovery {
         self.fallback_since = None;
         self.approach = None;
         self.still = None;
+        self.posed = None;
     }
 
     /// One driving cycle of `dt_s` at `pose`, `goal_m` from the goal; `monitor` is what the
     /// collision monitor did to the previous cycle's command (`None`: nothing to check, or it is
     /// off); `unmapped_m` is how far the nearest obstacle the agent sees where the floor plan
-    /// is free lies from the robot's centre (infinite: none). Returns who drives this cycle.
+    /// is free lies from the robot's centre (infinite: none); `ahead_m` how far the laser sees
+    /// straight ahead ([`ahead_m`]; infinite: nothing). Returns who drives this cycle.
     pub fn drive(
         &mut self,
         dt_s: f64,
@@ -190,6 +240,7 @@ impl Recovery {
         goal_m: f64,
         monitor: Option<Verdict>,
         unmapped_m: f64,
+        ahead_m: f64,
     ) -> Mode {
         self.clock_s += dt_s;
         let now = self.clock_s;
@@ -203,6 +254,7 @@ impl Recovery {
                 self.held_s = 0.0;
                 self.approach = None;
                 self.still = None;
+                self.posed = None;
                 return Mode::Primary;
             }
             return Mode::Fallback;
@@ -233,6 +285,23 @@ impl Recovery {
             self.take_over(pose, now, "stalled beside an obstacle the floor plan lacks");
             return Mode::Fallback;
         }
+        self.posed = match self.posed {
+            Some((at, since_s))
+                if pose.distance_m(&at) < STILL_M
+                    && normalize_angle(pose.yaw_rad - at.yaw_rad).abs() < STILL_RAD =>
+            {
+                Some((at, since_s))
+            }
+            _ => Some((pose, now)),
+        };
+        let cornered = ahead_m <= c.cornered_m
+            && self
+                .posed
+                .is_some_and(|(_, since_s)| now - since_s >= c.cornered_stall_s);
+        if cornered {
+            self.take_over(pose, now, "cornered: standing before something ahead");
+            return Mode::Fallback;
+        }
         let held = monitor.is_some_and(|m| m.limited() && m.v_mps.abs() < c.held_speed_mps);
         self.held_s = if held {
             self.held_s + dt_s
@@ -251,6 +320,7 @@ impl Recovery {
         self.held_s = 0.0;
         self.approach = None;
         self.still = None;
+        self.posed = None;
         self.recoveries += 1;
         tracing::debug!(
             x_m = pose.x_m,
@@ -281,9 +351,11 @@ mod tests {
 
     /// The cycles until the mode first changes from what the first cycle gives.
     fn until_switch(r: &mut Recovery, pose: Pose2D, held: Option<f64>) -> usize {
-        let first = r.drive(DT, pose, FAR_M, verdict(held), f64::INFINITY);
+        let first = r.drive(DT, pose, FAR_M, verdict(held), f64::INFINITY, f64::INFINITY);
         (1..1000)
-            .find(|_| r.drive(DT, pose, FAR_M, verdict(held), f64::INFINITY) != first)
+            .find(|_| {
+                r.drive(DT, pose, FAR_M, verdict(held), f64::INFINITY, f64::INFINITY) != first
+            })
             .expect("no switch within 100 s")
     }
 
@@ -298,10 +370,16 @@ mod tests {
         assert_eq!(r.recoveries(), 1);
         // The dynamic window drives until 1.5 m of headway ...
         let on = Pose2D::new(2.4, 2.0, 0.0);
-        assert_eq!(r.drive(DT, on, FAR_M, None, f64::INFINITY), Mode::Fallback);
+        assert_eq!(
+            r.drive(DT, on, FAR_M, None, f64::INFINITY, f64::INFINITY),
+            Mode::Fallback
+        );
         // ... then the driving controller takes over again, the hold timed afresh.
         let away = Pose2D::new(2.6, 2.0, 0.0);
-        assert_eq!(r.drive(DT, away, FAR_M, None, f64::INFINITY), Mode::Primary);
+        assert_eq!(
+            r.drive(DT, away, FAR_M, None, f64::INFINITY, f64::INFINITY),
+            Mode::Primary
+        );
         let n = until_switch(&mut r, away, Some(0.0));
         assert!((9..=11).contains(&n), "{n}");
         assert_eq!(r.recoveries(), 2);
@@ -314,12 +392,22 @@ mod tests {
         let mut r = Recovery::new(RecoveryConfig::default());
         let here = Pose2D::new(0.0, 0.0, 0.0);
         for _ in 0..600 {
-            assert_eq!(r.drive(DT, here, FAR_M, None, f64::INFINITY), Mode::Primary);
+            assert_eq!(
+                r.drive(DT, here, FAR_M, None, f64::INFINITY, f64::INFINITY),
+                Mode::Primary
+            );
         }
         // Slowed, but still driving.
         for _ in 0..600 {
             assert_eq!(
-                r.drive(DT, here, FAR_M, verdict(Some(0.6)), f64::INFINITY),
+                r.drive(
+                    DT,
+                    here,
+                    FAR_M,
+                    verdict(Some(0.6)),
+                    f64::INFINITY,
+                    f64::INFINITY
+                ),
                 Mode::Primary
             );
         }
@@ -334,7 +422,7 @@ mod tests {
         for k in 0..600 {
             let held = (k % 2 == 0).then_some(0.0);
             assert_eq!(
-                r.drive(DT, here, FAR_M, verdict(held), f64::INFINITY),
+                r.drive(DT, here, FAR_M, verdict(held), f64::INFINITY, f64::INFINITY),
                 Mode::Primary,
                 "cycle {k}"
             );
@@ -357,7 +445,14 @@ mod tests {
         assert_eq!(r.mode(), Mode::Primary);
         // After a stop the hold is timed afresh.
         assert_eq!(
-            r.drive(DT, here, FAR_M, verdict(Some(0.0)), f64::INFINITY),
+            r.drive(
+                DT,
+                here,
+                FAR_M,
+                verdict(Some(0.0)),
+                f64::INFINITY,
+                f64::INFINITY
+            ),
             Mode::Primary
         );
     }
@@ -370,7 +465,7 @@ mod tests {
         for k in 0..200 {
             let goal_m = 0.9 - 0.005 * f64::from(k);
             assert_eq!(
-                r.drive(DT, here, goal_m, None, f64::INFINITY),
+                r.drive(DT, here, goal_m, None, f64::INFINITY, f64::INFINITY),
                 Mode::Primary,
                 "cycle {k}"
             );
@@ -378,22 +473,28 @@ mod tests {
         // Standing 0.8 m short: relieved after approach_stall_s ...
         let mut r = Recovery::new(RecoveryConfig::default());
         let n = (0..100)
-            .find(|_| r.drive(DT, here, 0.8, None, f64::INFINITY) == Mode::Fallback)
+            .find(|_| r.drive(DT, here, 0.8, None, f64::INFINITY, f64::INFINITY) == Mode::Fallback)
             .unwrap();
         assert!((29..=31).contains(&n), "{n}");
         assert_eq!(r.recoveries(), 1);
         // ... but not standing further out than approach_m, before a glass door.
         let mut r = Recovery::new(RecoveryConfig::default());
         for _ in 0..600 {
-            assert_eq!(r.drive(DT, here, 1.2, None, f64::INFINITY), Mode::Primary);
+            assert_eq!(
+                r.drive(DT, here, 1.2, None, f64::INFINITY, f64::INFINITY),
+                Mode::Primary
+            );
         }
         // The next goal, once one is reached, is timed afresh.
         let mut r = Recovery::new(RecoveryConfig::default());
         for _ in 0..20 {
-            r.drive(DT, here, 0.3, None, f64::INFINITY);
+            r.drive(DT, here, 0.3, None, f64::INFINITY, f64::INFINITY);
         }
         for _ in 0..20 {
-            assert_eq!(r.drive(DT, here, 0.9, None, f64::INFINITY), Mode::Primary);
+            assert_eq!(
+                r.drive(DT, here, 0.9, None, f64::INFINITY, f64::INFINITY),
+                Mode::Primary
+            );
         }
     }
 
@@ -405,7 +506,7 @@ mod tests {
         let n = (0..100)
             .find(|&k| {
                 let turning = Pose2D::new(0.01 * f64::from(k % 3), 0.0, 0.1 * f64::from(k));
-                r.drive(DT, turning, FAR_M, None, 0.5) == Mode::Fallback
+                r.drive(DT, turning, FAR_M, None, 0.5, f64::INFINITY) == Mode::Fallback
             })
             .expect("never relieved");
         assert!((29..=31).contains(&n), "{n}");
@@ -414,10 +515,13 @@ mod tests {
         // creeping on beside the cabinet.
         let mut r = Recovery::new(RecoveryConfig::default());
         for k in 0..100 {
-            assert_eq!(r.drive(DT, here, FAR_M, None, f64::INFINITY), Mode::Primary);
+            assert_eq!(
+                r.drive(DT, here, FAR_M, None, f64::INFINITY, f64::INFINITY),
+                Mode::Primary
+            );
             let creeping = Pose2D::new(0.05 * f64::from(k), 0.0, 0.0);
             assert_eq!(
-                r.drive(DT, creeping, FAR_M, None, 0.5),
+                r.drive(DT, creeping, FAR_M, None, 0.5, f64::INFINITY),
                 Mode::Primary,
                 "{k}"
             );
@@ -425,8 +529,84 @@ mod tests {
         // Farther than beside_m: left alone.
         let mut r = Recovery::new(RecoveryConfig::default());
         for _ in 0..100 {
-            assert_eq!(r.drive(DT, here, FAR_M, None, 1.0), Mode::Primary);
+            assert_eq!(
+                r.drive(DT, here, FAR_M, None, 1.0, f64::INFINITY),
+                Mode::Primary
+            );
         }
+    }
+
+    #[test]
+    fn standing_before_a_wall_for_cornered_stall_s_hands_over_but_not_turning_or_before_glass() {
+        // Creeping at 0.02 m/s facing a wall 0.5 m ahead (DLM-Net at task E's hairpins):
+        // relieved after cornered_stall_s.
+        let mut r = Recovery::new(RecoveryConfig::default());
+        let n = (0..100)
+            .find(|&k| {
+                let creeping = Pose2D::new(0.002 * f64::from(k), 0.0, 0.3);
+                r.drive(DT, creeping, FAR_M, None, f64::INFINITY, 0.5) == Mode::Fallback
+            })
+            .expect("never relieved");
+        assert!((29..=31).contains(&n), "{n}");
+        assert_eq!(r.recoveries(), 1);
+        // Dithering left and right (swings of 0.5 rad) before the wall is standing too ...
+        let mut r = Recovery::new(RecoveryConfig::default());
+        let n = (0..100)
+            .find(|&k| {
+                let dithering = Pose2D::new(0.0, 0.0, if k % 10 < 5 { 0.25 } else { -0.25 });
+                r.drive(DT, dithering, FAR_M, None, f64::INFINITY, 0.7) == Mode::Fallback
+            })
+            .expect("never relieved");
+        assert!((29..=31).contains(&n), "{n}");
+        // ... but turning on the spot before it is doing something: left alone.
+        let mut r = Recovery::new(RecoveryConfig::default());
+        for k in 0..100 {
+            let turning = Pose2D::new(0.0, 0.0, 0.05 * f64::from(k));
+            assert_eq!(
+                r.drive(DT, turning, FAR_M, None, f64::INFINITY, 0.5),
+                Mode::Primary,
+                "{k}"
+            );
+        }
+        // Standing before a shut glass door: the laser sees the room behind it, 3 m on.
+        let mut r = Recovery::new(RecoveryConfig::default());
+        let here = Pose2D::new(0.0, 0.0, 0.0);
+        for _ in 0..600 {
+            assert_eq!(
+                r.drive(DT, here, FAR_M, None, f64::INFINITY, 3.0),
+                Mode::Primary
+            );
+        }
+    }
+
+    fn scan(ranges_m: Vec<f32>) -> LaserScan {
+        let n = ranges_m.len() as f32;
+        LaserScan {
+            header: protocol::Header::default(),
+            angle_min_rad: -std::f32::consts::FRAC_PI_2,
+            angle_increment_rad: std::f32::consts::PI / (n - 1.0),
+            range_min_m: 0.05,
+            range_max_m: 8.0,
+            ranges_m,
+        }
+    }
+
+    #[test]
+    fn ahead_is_the_nearest_valid_return_within_the_forward_sector() {
+        // 181 beams, 1 degree apart, -90..90 degrees; everything 5 m away ...
+        let mut ranges = vec![5.0_f32; 181];
+        // ... a wall 0.4 m to the side (60 degrees off) does not count ...
+        ranges[150] = 0.4;
+        // ... one 0.7 m away 10 degrees off does, and so does 0.6 m at 14 degrees ...
+        ranges[100] = 0.7;
+        ranges[76] = 0.6;
+        // ... but not a beam below the range minimum or at the range maximum (no return).
+        ranges[90] = 0.01;
+        ranges[91] = 8.0;
+        assert!((ahead_m(&scan(ranges.clone())) - 0.6).abs() < 1e-6);
+        ranges[76] = 5.0;
+        assert!((ahead_m(&scan(ranges)) - 0.7).abs() < 1e-6);
+        assert!(ahead_m(&scan(vec![8.0; 181])).is_infinite());
     }
 
     #[test]
@@ -438,10 +618,24 @@ mod tests {
         let here = Pose2D::new(0.0, 0.0, 0.0);
         for _ in 0..100 {
             assert_eq!(
-                r.drive(DT, here, FAR_M, verdict(Some(0.0)), f64::INFINITY),
+                r.drive(
+                    DT,
+                    here,
+                    FAR_M,
+                    verdict(Some(0.0)),
+                    f64::INFINITY,
+                    f64::INFINITY
+                ),
                 Mode::Primary
             );
-            assert_eq!(r.drive(DT, here, 0.5, None, 0.1), Mode::Primary);
+            assert_eq!(
+                r.drive(DT, here, 0.5, None, 0.1, f64::INFINITY),
+                Mode::Primary
+            );
+            assert_eq!(
+                r.drive(DT, here, FAR_M, None, f64::INFINITY, 0.3),
+                Mode::Primary
+            );
         }
     }
 
