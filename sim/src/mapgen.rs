@@ -4,7 +4,8 @@
 //! cell, white free, black wall) under `maps/` and every scenario YAML beside it; a test
 //! regenerates them and compares with the committed files. Plans start solid and corridors and
 //! rooms are carved out (≥ 1.5 m wide, mostly 2 m); the maze of task E comes from a recursive
-//! backtracker with a fixed seed. Scenarios add what the plans lack: furniture, glass, people.
+//! backtracker with a fixed seed, and two training mazes ([`TRAINING_MAZE_SEEDS`]) from the same
+//! generator with other seeds. Scenarios add what the plans lack: furniture, glass, people.
 //! The behaviour checks of the paper's §4.2 (a glass door, a person oncoming or ahead) each put
 //! one such thing in a plain corridor, so a run's outcome says how the robot met it.
 
@@ -264,6 +265,11 @@ pub const MAZE_CELL_M: f64 = 2.6;
 const MAZE_WALL_M: f64 = 0.6;
 /// The maze seed (task E).
 pub const MAZE_SEED: u64 = 2017;
+/// Seeds of the training mazes (`train_maze_a`, `train_maze_b`): the same generator as task
+/// E's, other layouts and other looks, so a network can learn a maze's hairpins round thin walls
+/// (which the other training maps and the generated buildings hardly have) without seeing task
+/// E's maze.
+pub const TRAINING_MAZE_SEEDS: [u64; 2] = [11, 12];
 
 /// Centre of maze cell (i, j).
 pub fn maze_cell_centre(i: usize, j: usize) -> (f64, f64) {
@@ -275,14 +281,14 @@ pub fn maze_cell_centre(i: usize, j: usize) -> (f64, f64) {
     )
 }
 
-fn maze() -> Plan {
+fn maze(name: &str, seed: u64) -> Plan {
     #[allow(clippy::cast_precision_loss)]
     let (w, h) = (
         MAZE_WALL_M + MAZE_COLS as f64 * MAZE_CELL_M,
         MAZE_WALL_M + MAZE_ROWS as f64 * MAZE_CELL_M,
     );
-    let mut p = Plan::solid("maze", w, h);
-    let mut rng = ChaCha8Rng::seed_from_u64(MAZE_SEED);
+    let mut p = Plan::solid(name, w, h);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut visited = [false; MAZE_COLS * MAZE_ROWS];
     let mut stack = vec![(0usize, 0usize)];
     visited[0] = true;
@@ -370,8 +376,10 @@ pub fn plans() -> Vec<Plan> {
         hall(),
         lab(),
         campus(),
-        maze(),
+        maze("maze", MAZE_SEED),
         corridor(),
+        maze("maze_train_a", TRAINING_MAZE_SEEDS[0]),
+        maze("maze_train_b", TRAINING_MAZE_SEEDS[1]),
     ]
 }
 
@@ -810,6 +818,54 @@ fn maze_look() -> AppearanceSpec {
     }
 }
 
+/// The training mazes' looks: unlike task E's and unlike each other, so what a network learns
+/// there is the geometry of a hairpin, not task E's walls.
+fn maze_train_look(i: usize) -> AppearanceSpec {
+    let (default, other) = if i == 0 {
+        (
+            look(
+                [170, 95, 80],
+                WallTexture::Bricks,
+                [95, 95, 110],
+                FloorTexture::Carpet,
+                [225, 220, 210],
+                1.0,
+            ),
+            look(
+                [200, 200, 190],
+                WallTexture::Plain,
+                [150, 140, 120],
+                FloorTexture::Tiles,
+                [240, 240, 235],
+                1.1,
+            ),
+        )
+    } else {
+        (
+            look(
+                [150, 150, 145],
+                WallTexture::Concrete,
+                [175, 165, 140],
+                FloorTexture::Tiles,
+                [230, 230, 225],
+                0.9,
+            ),
+            look(
+                [90, 120, 170],
+                WallTexture::Tiles,
+                [110, 85, 60],
+                FloorTexture::Planks,
+                [220, 215, 200],
+                1.0,
+            ),
+        )
+    };
+    AppearanceSpec {
+        default,
+        areas: vec![area("north half", 0.0, 9.4, 27.0, 19.0, other)],
+    }
+}
+
 fn corridor_look() -> AppearanceSpec {
     AppearanceSpec {
         default: look(
@@ -1200,6 +1256,43 @@ pub fn scenarios() -> Vec<Scenario> {
         glass_door_y(11.0, 14.0, 16.0).to_vec(),
         vec![person(&[(4.0, 17.0), (26.0, 17.0)], 0.6, [220, 220, 60])],
     ));
+    // Two training mazes: hairpins round thin walls, other layouts and looks than task E's.
+    for (i, (name, map, seed)) in [
+        ("train_maze_a", "maze_train_a", 207),
+        ("train_maze_b", "maze_train_b", 208),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let cell = |a: usize, b: usize| {
+            let (x, y) = maze_cell_centre(a, b);
+            pt(x, y)
+        };
+        let (s0x, s0y) = maze_cell_centre(0, 0);
+        out.push(scenario(
+            Base {
+                name,
+                description: "Training in a maze of another seed and look than task E's",
+                role: Role::Training,
+                map,
+                seed,
+                start: pose(s0x, s0y, 0.0),
+                goals: vec![cell(9, 6), cell(9, 0), cell(5, 3), cell(0, 6)],
+                appearance: maze_train_look(i),
+            },
+            vec![bx(
+                maze_cell_centre(6, 2).0 + 0.6,
+                maze_cell_centre(6, 2).1 - 0.6,
+                0.5,
+                0.5,
+                0.0,
+                0.8,
+                GREY,
+            )],
+            vec![],
+            vec![],
+        ));
+    }
     out.extend(behaviour_scenarios());
     out
 }
