@@ -24,6 +24,7 @@ use robot_agent::collision_monitor::{self, CollisionMonitorConfig};
 use robot_agent::controllers::{
     ControlInput, Controller, DynamicWindow, DynamicWindowConfig, PathTracker, PathTrackerConfig,
 };
+use robot_agent::recovery::{self, Recovery, RecoveryConfig};
 use robot_agent::Limits;
 use test_support::fixtures;
 
@@ -162,6 +163,26 @@ fn bench_step(c: &mut Criterion) {
                 0.3,
                 1.0,
             ))
+        });
+    });
+    group.finish();
+
+    // The agent's recovery after every controller step: the laser's reading straight ahead
+    // and the triggers' bookkeeping (a robot standing 0.8 m before the box, so the cornered
+    // trigger's tracker keeps its pose and compares every cycle).
+    let mut group = c.benchmark_group("recovery");
+    group.sample_size(30);
+    group.bench_function("ahead_m", |b| {
+        b.iter(|| black_box(recovery::ahead_m(black_box(&near_scan))));
+    });
+    let mut rec = Recovery::new(RecoveryConfig {
+        cornered_stall_s: f64::INFINITY,
+        ..RecoveryConfig::default()
+    });
+    group.bench_function("ahead_m_and_drive", |b| {
+        b.iter(|| {
+            let ahead = recovery::ahead_m(black_box(&near_scan));
+            black_box(rec.drive(0.1, near, 5.0, None, f64::INFINITY, ahead))
         });
     });
     group.finish();

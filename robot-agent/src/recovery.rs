@@ -251,10 +251,7 @@ impl Recovery {
         if let Some((start, since_s)) = self.fallback_since {
             if pose.distance_m(&start) >= c.release_m || now - since_s >= c.max_s {
                 self.fallback_since = None;
-                self.held_s = 0.0;
-                self.approach = None;
-                self.still = None;
-                self.posed = None;
+                self.forget();
                 return Mode::Primary;
             }
             return Mode::Fallback;
@@ -273,31 +270,15 @@ impl Recovery {
             self.take_over(pose, now, "short of the goal");
             return Mode::Fallback;
         }
-        self.still = match self.still {
-            Some((at, since_s)) if pose.distance_m(&at) < STILL_M => Some((at, since_s)),
-            _ => Some((pose, now)),
-        };
-        let stalled_beside = unmapped_m <= c.beside_m
-            && self
-                .still
-                .is_some_and(|(_, since_s)| now - since_s >= c.beside_stall_s);
+        // Any heading counts as the same spot here: turning on the spot beside it is no way out.
+        let still_s = stood_s(&mut self.still, pose, now, f64::INFINITY);
+        let stalled_beside = unmapped_m <= c.beside_m && still_s >= c.beside_stall_s;
         if stalled_beside {
             self.take_over(pose, now, "stalled beside an obstacle the floor plan lacks");
             return Mode::Fallback;
         }
-        self.posed = match self.posed {
-            Some((at, since_s))
-                if pose.distance_m(&at) < STILL_M
-                    && normalize_angle(pose.yaw_rad - at.yaw_rad).abs() < STILL_RAD =>
-            {
-                Some((at, since_s))
-            }
-            _ => Some((pose, now)),
-        };
-        let cornered = ahead_m <= c.cornered_m
-            && self
-                .posed
-                .is_some_and(|(_, since_s)| now - since_s >= c.cornered_stall_s);
+        let posed_s = stood_s(&mut self.posed, pose, now, STILL_RAD);
+        let cornered = ahead_m <= c.cornered_m && posed_s >= c.cornered_stall_s;
         if cornered {
             self.take_over(pose, now, "cornered: standing before something ahead");
             return Mode::Fallback;
@@ -315,12 +296,17 @@ impl Recovery {
         Mode::Primary
     }
 
-    fn take_over(&mut self, pose: Pose2D, now: f64, why: &str) {
-        self.fallback_since = Some((pose, now));
+    /// Starts every trigger afresh: after a hand-over either way, what came before says nothing.
+    fn forget(&mut self) {
         self.held_s = 0.0;
         self.approach = None;
         self.still = None;
         self.posed = None;
+    }
+
+    fn take_over(&mut self, pose: Pose2D, now: f64, why: &str) {
+        self.fallback_since = Some((pose, now));
+        self.forget();
         self.recoveries += 1;
         tracing::debug!(
             x_m = pose.x_m,
@@ -329,6 +315,16 @@ impl Recovery {
             "{why}: the dynamic window takes over"
         );
     }
+}
+
+/// How long the robot has stood where `tracker` last put it down: within [`STILL_M`] and
+/// `turn_rad` of that pose; a pose outside starts it afresh from here.
+fn stood_s(tracker: &mut Option<(Pose2D, f64)>, pose: Pose2D, now: f64, turn_rad: f64) -> f64 {
+    let kept = tracker.filter(|(at, _)| {
+        pose.distance_m(at) < STILL_M && normalize_angle(pose.yaw_rad - at.yaw_rad).abs() < turn_rad
+    });
+    let (_, since_s) = *tracker.insert(kept.unwrap_or((pose, now)));
+    now - since_s
 }
 
 #[cfg(test)]
