@@ -24,5 +24,6 @@ if ! "$PY" -c 'import torch, onnx, matplotlib, tqdm, PIL' 2>/dev/null; then
 fi
 "$PY" training/tests/test_smoke.py --seconds "$secs"
 "$PY" training/tests/test_activations.py
+"$PY" training/tests/test_dataset.py
 "$PY" training/tests/test_average.py
 "$PY" training/tests/test_init_camera.py

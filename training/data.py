@@ -108,6 +108,12 @@ class Pool:
                     f"{ds.root} has DLM labels of the {theirs.get('measure', DEFAULT_DLM_MEASURE)} measure, "
                     f"{first.root} of the {self.dlm_measure} measure; train on recordings labelled alike"
                 )
+            if "dlm_params" in ix and "dlm_params" in first.index and theirs != self.dlm_params:
+                # The planner plans with every parameter the card states (eval, the fleet).
+                raise ValueError(
+                    f"{ds.root} has DLM labels of the parameters {theirs}, {first.root} of "
+                    f"{self.dlm_params}; train on recordings labelled alike"
+                )
             if other != mine:
                 raise ValueError(
                     f"{ds.root} differs from {first.root} in image size, limits or LPE rendering: "
@@ -160,6 +166,7 @@ class Pool:
                 "dataset_id": ds.index["dataset_id"],
                 "dir": str(ds.root.resolve()),
                 "samples": len(ds),
+                "shard_fraction": float(ds.index.get("shard_fraction", 1.0)),
                 "command": ds.index.get("command", ""),
             }
             for ds in self.sets

@@ -53,16 +53,45 @@ class Dataset:
         return {name: arrays[shard][k] for name, arrays in self.fields.items()}
 
 
-def load(root: str | Path) -> Dataset:
-    """Opens a recording: index.json and every shard's arrays, memory-mapped and checked
+def parse_source(source: str | Path) -> tuple[Path, float]:
+    """`DIR` or `DIR@FRACTION`: a recording, or an evenly spaced share of its shards (whole
+    shards, so episodes stay whole but for the two at a cut). A share keeps several recordings
+    in memory together (training preloads the images) and keeps the mix between them chosen."""
+    text = str(source)
+    head, sep, tail = text.rpartition("@")
+    if not sep:
+        return Path(text), 1.0
+    try:
+        fraction = float(tail)
+    except ValueError:
+        raise ValueError(f"{text}: the share after '@' must be a number in (0, 1], not {tail!r}") from None
+    if not 0.0 < fraction <= 1.0:
+        raise ValueError(f"{text}: the share after '@' must be in (0, 1], not {fraction}")
+    return Path(head), fraction
+
+
+def shard_share(count: int, fraction: float) -> list[int]:
+    """Indices of an evenly spaced `fraction` of `count` shards (at least one)."""
+    chosen = [k for k in range(count) if int((k + 1) * fraction) > int(k * fraction)]
+    return chosen or [count - 1]
+
+
+def load(source: str | Path) -> Dataset:
+    """Opens a recording (`DIR`, or `DIR@FRACTION` for a share of its shards, see
+    `parse_source`): index.json and every chosen shard's arrays, memory-mapped and checked
     against the index (count, dtype, shape)."""
-    root = Path(root)
+    root, fraction = parse_source(source)
     index = json.loads((root / "index.json").read_text())
     if index.get("format") != FORMAT or index.get("version") != VERSION:
         raise ValueError(
             f"{root}: not a {FORMAT} v{VERSION} dataset "
             f"(format {index.get('format')!r}, version {index.get('version')!r})"
         )
+    if fraction < 1.0:
+        # The share is a dataset of its own: its id says so, and its count is what it holds.
+        shards = [index["shards"][k] for k in shard_share(len(index["shards"]), fraction)]
+        index = {**index, "shards": shards, "samples": sum(int(s["samples"]) for s in shards),
+                 "dataset_id": f"{index['dataset_id']}@{fraction:g}", "shard_fraction": fraction}
     ds = Dataset(root=root, index=index)
     start = 0
     for shard in index["shards"]:

@@ -54,7 +54,7 @@ def parse_args(argv=None) -> argparse.Namespace:
         description="Train an intention-net (dlm, lpe) or the Non-Intention Net (none) and export it to ONNX.",
     )
     p.add_argument("--kind", required=True, choices=model.KINDS)
-    p.add_argument("--data", required=True, nargs="+", help="recording folder(s) written by `eval record`")
+    p.add_argument("--data", required=True, nargs="+", help="recording folder(s) written by `eval record`; DIR@FRACTION: an evenly spaced share of its shards")
     p.add_argument("--out", required=True, help="output folder (checkpoints, history, loss.png, <kind>.onnx, card.json)")
     p.add_argument("--preset", default="default", choices=sorted(recipe.PRESETS),
                    help="default: LEARNING.md's recipe (L1, AdamW, balanced, augmented); paper: Gao et al.'s")

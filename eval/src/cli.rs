@@ -255,9 +255,10 @@ pub struct TableArgs {
     #[arg(long)]
     encounter: Option<Encounter>,
     /// How the planner derives the DLM (`heading`, `route` or `curvature`, planning `DlmMeasure`);
-    /// default: what the DLM-Net's card says it was trained on (`dlm_measure`; a card
-    /// without one: curvature, DLM-Net r1's), and the planner's default for a table without
-    /// DLM-Net. A value that contradicts the card is refused, unless `--dlm-measure-over-card`.
+    /// default: what the DLM-Net's card says it was trained on (`dlm_params`, every DLM
+    /// parameter, else `dlm_measure` with the planner's defaults; a card without either:
+    /// curvature, DLM-Net r1's), and the planner's default for a table without DLM-Net. A
+    /// value that contradicts the card is refused, unless `--dlm-measure-over-card`.
     #[arg(long)]
     dlm_measure: Option<DlmMeasure>,
     /// Lets `--dlm-measure` contradict the DLM-Net's card: the network is fed intentions of a
@@ -353,8 +354,8 @@ pub struct RecordArgs {
     #[arg(long, requires = "record_dir")]
     record_camera: bool,
     /// How the planner derives the DLM labels (`heading`, `route`, or `curvature`, what DLM-Net
-    /// r1 was trained on; planning `DlmMeasure`); default: the measure a DLM-Net `--policy` was
-    /// trained on (its card), else the planner's default. index.json records the `[dlm]`
+    /// r1 was trained on; planning `DlmMeasure`); default: the DLM parameters a DLM-Net
+    /// `--policy` was trained on (its card), else the planner's default. index.json records the `[dlm]`
     /// parameters as `dlm_params`. A measure that contradicts the policy's card is refused,
     /// unless `--dlm-measure-over-card`.
     #[arg(long)]
@@ -368,44 +369,67 @@ pub struct RecordArgs {
     out: PathBuf,
 }
 
-/// The DLM measure to plan with: the one asked for, else the one the DLM-Net `dlm_model`
-/// (when one drives) was trained on, read from its ONNX card (`dlm_measure`; absent: curvature,
-/// DLM-Net r1's), else the planner's default. A measure asked for that contradicts the card is
-/// refused unless `over_card`: the network would be fed intentions it never saw.
-fn dlm_measure_for(
+/// The DLM parameters to plan with: those the DLM-Net `dlm_model` (when one drives) was
+/// trained on, read from its ONNX card (`dlm_params`; a card without them: the planner's
+/// defaults for its `dlm_measure`, absent meaning curvature, DLM-Net r1's), else the planner's
+/// defaults for the measure asked for. A measure asked for that contradicts the card is refused
+/// unless `over_card`: the network would be fed intentions it never saw.
+fn dlm_params_for(
     asked: Option<DlmMeasure>,
     dlm_model: Option<&std::path::Path>,
     over_card: bool,
-) -> anyhow::Result<DlmMeasure> {
+) -> anyhow::Result<planning::DlmParams> {
+    let with_measure = |measure: DlmMeasure| planning::DlmParams {
+        measure,
+        ..planning::DlmParams::default()
+    };
     let Some(model) = dlm_model else {
-        return Ok(asked.unwrap_or_default());
+        return Ok(with_measure(asked.unwrap_or_default()));
     };
     let card = robot_agent::controllers::intention_net::read_card(model)
         .with_context(|| format!("reading the card of {}", model.display()))?;
-    let trained_on = match card.dlm_measure.as_deref() {
-        Some(name) => name
-            .parse::<DlmMeasure>()
-            .map_err(|e| anyhow::anyhow!("{}: card key dlm_measure: {e}", model.display()))?,
-        None => DlmMeasure::Curvature,
+    let trained_on = match (card.dlm_params.as_deref(), card.dlm_measure.as_deref()) {
+        (Some(raw), measure) => card_dlm_params(raw, measure).map_err(|e| {
+            anyhow::anyhow!("{}: card key dlm_params = {raw}: {e}", model.display())
+        })?,
+        (None, Some(name)) => with_measure(
+            name.parse::<DlmMeasure>()
+                .map_err(|e| anyhow::anyhow!("{}: card key dlm_measure: {e}", model.display()))?,
+        ),
+        (None, None) => with_measure(DlmMeasure::Curvature),
     };
     match asked {
-        Some(a) if a != trained_on && over_card => {
+        Some(a) if a != trained_on.measure && over_card => {
             tracing::warn!(
                 model = %model.display(),
-                trained_on = trained_on.as_str(),
+                trained_on = trained_on.measure.as_str(),
                 planned_with = a.as_str(),
                 "the DLM-Net is fed a DLM measure it was not trained on (--dlm-measure-over-card)"
             );
-            Ok(a)
+            Ok(with_measure(a))
         }
-        Some(a) if a != trained_on => anyhow::bail!(
+        Some(a) if a != trained_on.measure => anyhow::bail!(
             "--dlm-measure {} but the card of {} says it was trained on the {} DLM \
              (--dlm-measure-over-card to drive it on another measure anyway)",
             a.as_str(),
             model.display(),
-            trained_on.as_str()
+            trained_on.measure.as_str()
         ),
         _ => Ok(trained_on),
+    }
+}
+
+/// A card's `dlm_params`: valid planner DLM parameters whose measure is the card's
+/// `dlm_measure` (when it has one).
+fn card_dlm_params(raw: &str, measure: Option<&str>) -> Result<planning::DlmParams, String> {
+    let params: planning::DlmParams =
+        serde_json::from_str(raw).map_err(|e| format!("bad JSON: {e}"))?;
+    params.validate().map_err(|e| e.to_string())?;
+    match measure {
+        Some(m) if m.trim() != params.measure.as_str() => {
+            Err(format!("its measure is not the card's dlm_measure = {m}"))
+        }
+        _ => Ok(params),
     }
 }
 
@@ -454,7 +478,7 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
                 record: record_settings(args.record_dir.as_deref(), args.record_camera),
                 ..crate::record::recording_run_options()
             };
-            run.intention.dlm.measure = dlm_measure_for(
+            run.intention.dlm = dlm_params_for(
                 args.dlm_measure,
                 dlm_policy.as_deref(),
                 args.dlm_measure_over_card,
@@ -606,7 +630,7 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
                 intention.planner.centring.enabled = false;
             }
             intention.seen.enabled = !args.no_seen_obstacles;
-            intention.dlm.measure = dlm_measure_for(
+            intention.dlm = dlm_params_for(
                 args.dlm_measure,
                 methods
                     .contains(&ControllerKind::Dlm)
@@ -934,24 +958,32 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_dlm_is_planned_with_the_measure_its_dlm_net_was_trained_on() {
+    fn the_dlm_is_planned_with_the_parameters_its_dlm_net_was_trained_on() {
         let shipped = test_support::models_dir().join("dlm.onnx");
         let fixture = test_support::models_dir().join("fixtures").join("dlm.onnx");
-        // The shipped DLM-Net was trained on the route DLM; a card without the key
-        // (the fixture, DLM-Net r1) means curvature.
+        let measure = |asked, model: Option<&std::path::Path>, over_card| {
+            dlm_params_for(asked, model, over_card).map(|p| p.measure)
+        };
+        // The shipped DLM-Net states every parameter (the route DLM); a card without them
+        // (the fixture, DLM-Net r1) means the defaults of the curvature DLM.
+        let card = robot_agent::controllers::intention_net::read_card(&shipped).unwrap();
         assert_eq!(
-            dlm_measure_for(None, Some(&shipped), false).unwrap(),
+            dlm_params_for(None, Some(&shipped), false).unwrap(),
+            card_dlm_params(&card.dlm_params.unwrap(), card.dlm_measure.as_deref()).unwrap()
+        );
+        assert_eq!(
+            measure(None, Some(&shipped), false).unwrap(),
             DlmMeasure::Route
         );
         assert_eq!(
-            dlm_measure_for(None, Some(&fixture), false).unwrap(),
-            DlmMeasure::Curvature
+            dlm_params_for(None, Some(&fixture), false).unwrap(),
+            planning::DlmParams::curvature()
         );
         assert_eq!(
-            dlm_measure_for(Some(DlmMeasure::Route), Some(&shipped), false).unwrap(),
+            measure(Some(DlmMeasure::Route), Some(&shipped), false).unwrap(),
             DlmMeasure::Route
         );
-        let err = dlm_measure_for(Some(DlmMeasure::Curvature), Some(&shipped), false).unwrap_err();
+        let err = measure(Some(DlmMeasure::Curvature), Some(&shipped), false).unwrap_err();
         assert!(
             err.to_string().contains("--dlm-measure curvature")
                 && err.to_string().contains("the route DLM"),
@@ -959,20 +991,37 @@ mod tests {
         );
         // Unless told to drive it on another measure anyway.
         assert_eq!(
-            dlm_measure_for(Some(DlmMeasure::Curvature), Some(&shipped), true).unwrap(),
+            measure(Some(DlmMeasure::Curvature), Some(&shipped), true).unwrap(),
             DlmMeasure::Curvature
         );
         // Without a DLM-Net, what is asked for, else the default.
         assert_eq!(
-            dlm_measure_for(Some(DlmMeasure::Curvature), None, false).unwrap(),
+            measure(Some(DlmMeasure::Curvature), None, false).unwrap(),
             DlmMeasure::Curvature
         );
         assert_eq!(
-            dlm_measure_for(None, None, false).unwrap(),
-            DlmMeasure::default()
+            dlm_params_for(None, None, false).unwrap(),
+            planning::DlmParams::default()
         );
         let missing = test_support::models_dir().join("no-such-model.onnx");
-        assert!(dlm_measure_for(None, Some(&missing), false).is_err());
+        assert!(dlm_params_for(None, Some(&missing), false).is_err());
+    }
+
+    #[test]
+    fn a_cards_dlm_params_are_checked_and_named_when_wrong() {
+        let raw = r#"{"measure":"route","window_m":1.5,"curvature_threshold_per_m":0.3,"heading_start_m":1.0,"heading_chord_m":1.0,"turn_threshold_rad":0.8,"turn_release_rad":0.4,"stop_distance_m":0.3}"#;
+        let params = card_dlm_params(raw, Some("route")).unwrap();
+        assert_eq!(params.measure, DlmMeasure::Route);
+        assert!((params.turn_release_rad - 0.4).abs() < 1e-12);
+        assert_eq!(card_dlm_params(raw, None).unwrap(), params);
+        for (bad, measure, says) in [
+            (raw.replace("0.4", "0.9"), Some("route"), "turn_release_rad"),
+            (raw.to_string(), Some("heading"), "dlm_measure = heading"),
+            (raw.replace("window_m", "window"), Some("route"), "bad JSON"),
+        ] {
+            let err = card_dlm_params(&bad, measure).unwrap_err();
+            assert!(err.contains(says), "{bad}: {err}");
+        }
     }
 
     #[test]

@@ -21,7 +21,7 @@ use crate::bench::{markdown_table, run_bench, BenchOptions};
 use crate::config::ServiceConfig;
 use crate::http::auth::TokenSource;
 use crate::http::{ServeOptions, Server};
-use planning::intention::{dlm_on_map, floor_plan_route, render_lpe, DlmMeasure};
+use planning::intention::{dlm_on_map, floor_plan_route, render_lpe};
 use planning::picture::{render_picture_with_route, save_picture};
 use planning::{Planner, PlanningMap};
 
@@ -659,7 +659,10 @@ fn plan(args: &PlanArgs, out: &mut dyn Write) -> anyhow::Result<()> {
     if let Some(pic) = &args.picture {
         // The route measure's route, as far as the path goes, beside the path it measures
         // instead.
-        let route = (cfg.dlm.measure == DlmMeasure::Route)
+        let route = cfg
+            .dlm
+            .measure
+            .uses_route()
             .then(|| floor_plan_route(&map, args.start, args.goal, path.length_m))
             .flatten()
             .unwrap_or_default();

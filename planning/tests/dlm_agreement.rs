@@ -124,6 +124,7 @@ fn dlm_agreement_on_seven_maps() {
         DlmMeasure::Curvature,
         DlmMeasure::Heading,
         DlmMeasure::Route,
+        DlmMeasure::FirstTurn,
     ] {
         println!(
             "\n{} measure, {routes} routes per map\n\n| map | cycles | kept plan = new search | new search = new search, other jitter | DLM changes | after at most 0.3 s |\n|---|---|---|---|---|---|",

@@ -833,3 +833,32 @@ fn obstacles_closing_the_corridor_leave_the_plan_on_the_floor_plan_within_the_ex
     };
     assert!(closest_m(&through.path, Pose2D::new(12.0, 5.2, 0.0)) < 0.3);
 }
+
+/// Round the end of a thin wall of task E's maze (a hairpin: the route runs east round the
+/// wall's end at (23.9, 15.6) and back north on its other side to the goal): DLM-Net r4,
+/// facing north at the wall's end, was told `go_forward` by the route measure, whose chord
+/// 1–2 m ahead already runs north on the far side, and stood there (task E seed 0, 2026-11-28).
+/// The first-turn measure tells it to turn right round the end, and left again once round it.
+#[test]
+fn the_first_turn_measure_turns_round_the_end_of_a_thin_wall() {
+    let config = IntentionConfig::default();
+    let map = scenario_map("maze", &config);
+    let goal = Pose2D::new(25.0, 17.2, 0.0);
+    let dlm = |measure: DlmMeasure, robot: Pose2D| {
+        let params = DlmParams {
+            measure,
+            ..DlmParams::default()
+        };
+        let route = planning::intention::floor_plan_route(&map, robot, goal, 2.0).unwrap();
+        planning::intention::next_dlm_along(&route, Some(&route), robot, &params, None)
+    };
+    let at_the_end = Pose2D::new(23.03, 15.74, std::f64::consts::FRAC_PI_2);
+    assert_eq!(dlm(DlmMeasure::Route, at_the_end), Dlm::GoForward);
+    assert_eq!(dlm(DlmMeasure::FirstTurn, at_the_end), Dlm::TurnRight);
+    // Facing east past the end, the way on is north: left.
+    let round = Pose2D::new(24.4, 15.3, 0.0);
+    assert_eq!(dlm(DlmMeasure::FirstTurn, round), Dlm::TurnLeft);
+    // Facing north on the far side, straight on to the goal.
+    let beyond = Pose2D::new(24.7, 16.0, std::f64::consts::FRAC_PI_2);
+    assert_eq!(dlm(DlmMeasure::FirstTurn, beyond), Dlm::GoForward);
+}

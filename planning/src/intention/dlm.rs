@@ -24,6 +24,15 @@
 //!   measure's rule on the floor plan's route from the robot to the goal ([`super::route`])
 //!   instead of on the searched path, so the DLM does not depend on how a search bent (a kept
 //!   plan and a new search from one pose get the same DLM); `Stop` still comes from the path.
+//! - [`DlmMeasure::FirstTurn`]: the first turn on the floor plan's route. The route's first
+//!   `heading_start_m + heading_chord_m` are cut into pieces `heading_chord_m / 2` long, each
+//!   measured against the robot's heading; the first piece whose angle reaches
+//!   `turn_threshold_rad` decides the side, and a turn holds while the first piece at or past
+//!   `turn_release_rad` is on its side. The route measure's one chord skips the first metre:
+//!   round the end of a thin wall (a maze's hairpin) the route turns 180° within it, so the
+//!   chord points along the way back, "go forward" to a robot still facing the wall's end, or
+//!   ±π, left and right by a hair (task E, 2026-11-28: DLM-Net stood still there). The first
+//!   piece that turns is the turn the robot has to make next.
 
 use protocol::{Dlm, Pose2D};
 
@@ -45,9 +54,18 @@ pub enum DlmMeasure {
     /// (the default since DLM-Net r2, docs/evaluation.md round 10).
     #[default]
     Route,
+    /// The first turn on the floor plan's route, piece by piece (see the module docs).
+    FirstTurn,
 }
 
 impl DlmMeasure {
+    /// Whether the measure turns on the floor plan's route ([`super::route`]) rather than on
+    /// the searched path.
+    #[must_use]
+    pub fn uses_route(self) -> bool {
+        matches!(self, Self::Route | Self::FirstTurn)
+    }
+
     /// The name used in config files and model cards.
     #[must_use]
     pub fn as_str(self) -> &'static str {
@@ -55,6 +73,7 @@ impl DlmMeasure {
             Self::Curvature => "curvature",
             Self::Heading => "heading",
             Self::Route => "route",
+            Self::FirstTurn => "first_turn",
         }
     }
 }
@@ -67,8 +86,9 @@ impl std::str::FromStr for DlmMeasure {
             "curvature" => Ok(Self::Curvature),
             "heading" => Ok(Self::Heading),
             "route" => Ok(Self::Route),
+            "first_turn" => Ok(Self::FirstTurn),
             other => Err(format!(
-                "unknown DLM measure {other:?} (expected curvature, heading or route)"
+                "unknown DLM measure {other:?} (expected curvature, heading, route or first_turn)"
             )),
         }
     }
@@ -265,7 +285,9 @@ pub fn dlm_on_map(
     params: &DlmParams,
     previous: Option<Dlm>,
 ) -> Dlm {
-    let route = (params.measure == DlmMeasure::Route)
+    let route = params
+        .measure
+        .uses_route()
         .then(|| {
             floor_plan_route(
                 map,
@@ -321,7 +343,40 @@ pub fn next_dlm_along(
                 _ => Dlm::GoForward,
             }
         }
+        DlmMeasure::FirstTurn => {
+            let angles = piece_angles_rad(route.unwrap_or(rest), robot, params);
+            let first_past = |limit: f64| angles.iter().copied().find(|a| a.abs() >= limit);
+            match (previous, first_past(params.turn_release_rad)) {
+                (Some(Dlm::TurnLeft), Some(a)) if a > 0.0 => Dlm::TurnLeft,
+                (Some(Dlm::TurnRight), Some(a)) if a < 0.0 => Dlm::TurnRight,
+                _ => match first_past(params.turn_threshold_rad) {
+                    Some(a) if a > 0.0 => Dlm::TurnLeft,
+                    Some(_) => Dlm::TurnRight,
+                    None => Dlm::GoForward,
+                },
+            }
+        }
     }
+}
+
+/// The angles (rad, positive to the left, in (-pi, pi]) from the robot's heading to each
+/// piece, `heading_chord_m / 2` long, of `route`'s first `heading_start_m + heading_chord_m`,
+/// nearest first; a last piece shorter than 5 cm where the route ends is left out.
+#[must_use]
+pub fn piece_angles_rad(route: &[Pose2D], robot: Pose2D, params: &DlmParams) -> Vec<f64> {
+    let piece_m = 0.5 * params.heading_chord_m;
+    let reach_m = (params.heading_start_m + params.heading_chord_m).min(length_of(route));
+    let mut angles = Vec::new();
+    let mut from_m = 0.0;
+    while from_m + 0.05 < reach_m {
+        let to_m = (from_m + piece_m).min(reach_m);
+        if let (Some(a), Some(b)) = (point_along(route, from_m), point_along(route, to_m)) {
+            let direction = (b.y_m - a.y_m).atan2(b.x_m - a.x_m);
+            angles.push(protocol::normalize_angle(direction - robot.yaw_rad));
+        }
+        from_m = to_m;
+    }
+    angles
 }
 
 /// The angle (rad, positive to the left, in (-pi, pi]) from the robot's heading to the chord
@@ -447,6 +502,55 @@ mod tests {
         assert_eq!(dlm_from_path(&path, mid, &params()), Dlm::TurnRight);
         let last = second[second.len() - 1];
         assert_eq!(dlm_from_path(&path, last, &params()), Dlm::GoForward);
+    }
+
+    #[test]
+    fn first_turn_measure_takes_the_nearest_turn_and_holds_it_round_a_hairpin() {
+        let params = DlmParams {
+            measure: DlmMeasure::FirstTurn,
+            ..DlmParams::default()
+        };
+        // A U-turn round a wall's end: 0.4 m north, 0.6 m east, then south.
+        let mut route = vec![Pose2D::new(0.0, 0.0, FRAC_PI_2), Pose2D::new(0.0, 0.4, 0.0)];
+        route.push(Pose2D::new(0.6, 0.4, -FRAC_PI_2));
+        route.push(Pose2D::new(0.6, -3.0, -FRAC_PI_2));
+        let robot = Pose2D::new(0.0, 0.0, FRAC_PI_2);
+        let angles = piece_angles_rad(&route, robot, &params);
+        assert_eq!(angles.len(), 4, "{angles:?}");
+        assert!(angles[0].abs() < 0.5 && angles[1] < -0.8, "{angles:?}");
+        let dlm = |robot, previous| next_dlm_along(&route, Some(&route), robot, &params, previous);
+        assert_eq!(dlm(robot, None), Dlm::TurnRight);
+        // The route measure's one chord (1-2 m) points straight back: a turn by a hair's side.
+        let chord = heading_ahead_rad(&route, robot, &params);
+        assert!((chord.abs() - PI).abs() < 1e-9, "{chord}");
+        // Halfway round (facing east at the top), the way on is south: still right, and held.
+        let top = Pose2D::new(0.3, 0.4, 0.0);
+        let rest = &route[1..];
+        let mut from_top = vec![top];
+        from_top.extend_from_slice(&rest[1..]);
+        assert_eq!(
+            next_dlm_along(
+                &from_top,
+                Some(&from_top),
+                top,
+                &params,
+                Some(Dlm::TurnRight)
+            ),
+            Dlm::TurnRight
+        );
+        // Facing down the way back: forward.
+        let back = Pose2D::new(0.6, 0.0, -FRAC_PI_2);
+        let along = [back, Pose2D::new(0.6, -3.0, -FRAC_PI_2)];
+        assert_eq!(
+            next_dlm_along(&along, Some(&along), back, &params, Some(Dlm::TurnRight)),
+            Dlm::GoForward
+        );
+        assert_eq!(
+            "first_turn".parse::<DlmMeasure>(),
+            Ok(DlmMeasure::FirstTurn)
+        );
+        assert_eq!(DlmMeasure::FirstTurn.as_str(), "first_turn");
+        assert!(DlmMeasure::FirstTurn.uses_route() && !DlmMeasure::Heading.uses_route());
     }
 
     #[test]

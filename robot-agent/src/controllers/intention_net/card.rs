@@ -122,6 +122,11 @@ pub struct ModelCard {
     /// `DlmMeasure` by name; `None`: a card from before it was recorded, the curvature DLM).
     /// The agent does not derive DLMs, so it only carries this for whoever plans them.
     pub dlm_measure: Option<String>,
+    /// `dlm` models only: every planner DLM parameter the network was trained on, as JSON
+    /// (planning `DlmParams`, the recording's `[dlm]` table; `None`: a card from before they
+    /// were recorded, the planner's defaults for `dlm_measure`). Carried, like
+    /// `dlm_measure`, for whoever plans DLMs, which parses and checks it.
+    pub dlm_params: Option<String>,
 }
 
 /// A card that is missing a key or has a value that makes no sense.
@@ -380,6 +385,10 @@ impl ModelCard {
                 ModelKind::Dlm => meta.get("dlm_measure").cloned(),
                 ModelKind::Lpe | ModelKind::None => None,
             },
+            dlm_params: match (kind, meta.get("dlm_params")) {
+                (ModelKind::Dlm, Some(raw)) => Some(raw.clone()),
+                _ => None,
+            },
         })
     }
 
@@ -416,6 +425,12 @@ impl ModelCard {
         }
         if let Some(px) = self.lpe_image_px {
             m.insert("lpe_image_px".into(), px.to_string());
+        }
+        if let Some(measure) = &self.dlm_measure {
+            m.insert("dlm_measure".into(), measure.clone());
+        }
+        if let Some(params) = &self.dlm_params {
+            m.insert("dlm_params".into(), params.clone());
         }
         m
     }
@@ -559,6 +574,21 @@ mod tests {
                 "{key}={value}: {err}"
             );
         }
+    }
+
+    #[test]
+    fn dlm_models_carry_their_dlm_measure_and_parameters() {
+        let mut meta = dlm_meta();
+        meta.insert("dlm_measure".into(), "route".into());
+        meta.insert("dlm_params".into(), r#"{"measure":"route"}"#.into());
+        let card = ModelCard::from_metadata(&meta).unwrap();
+        assert_eq!(card.dlm_measure.as_deref(), Some("route"));
+        assert_eq!(card.dlm_params.as_deref(), Some(r#"{"measure":"route"}"#));
+        assert_eq!(ModelCard::from_metadata(&card.to_metadata()).unwrap(), card);
+        // Only DLM-Nets have them.
+        meta.insert("kind".into(), "none".into());
+        let card = ModelCard::from_metadata(&meta).unwrap();
+        assert_eq!((card.dlm_measure, card.dlm_params), (None, None));
     }
 
     #[test]

@@ -1,0 +1,94 @@
+"""Test of a recording's share (`DIR@FRACTION`, training/dataset.py `parse_source`), on the smoke
+test's synthetic recording (4 shards: 250, 250, 250, 30 samples):
+
+* `@0.5` opens shards 1 and 3 (evenly spaced), 280 samples, read back equal to the whole
+  recording's rows there; its dataset id says the share; a training pool of it and the whole
+  recording has both, and the sources name the share;
+* `@1` is the whole recording;
+* recordings labelled with other DLM parameters are refused together;
+* refused, naming the value: a share of 0, above 1, or not a number.
+
+    .venv/bin/python training/tests/test_dataset.py
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "training" / "tests"))
+
+import numpy as np  # noqa: E402
+
+from training import data, dataset  # noqa: E402
+from test_smoke import write_synthetic  # noqa: E402
+
+
+def check(root: Path) -> None:
+    whole = dataset.load(root)
+    assert len(whole) == 780 and len(whole.index["shards"]) == 4, len(whole)
+    assert dataset.shard_share(4, 0.5) == [1, 3] and dataset.shard_share(23, 0.5) == list(range(1, 23, 2))
+    assert dataset.shard_share(3, 0.1) == [2], dataset.shard_share(3, 0.1)
+
+    half = dataset.load(f"{root}@0.5")
+    assert len(half) == 280 and [s["name"] for s in half.index["shards"]] == ["shard_00001", "shard_00003"]
+    assert half.index["dataset_id"] == "synthetic-smoke@0.5", half.index["dataset_id"]
+    assert np.array_equal(half.field("label"), np.concatenate([whole.fields["label"][1], whole.fields["label"][3]]))
+    assert np.array_equal(half.sample(250)["camera"], whole.sample(750)["camera"])
+
+    full = dataset.load(f"{root}@1")
+    assert len(full) == 780 and full.index["dataset_id"] == "synthetic-smoke"
+
+    pool = data.Pool([str(root), f"{root}@0.5"])
+    assert len(pool) == 1060 and pool.dataset_id == "synthetic-smoke+synthetic-smoke@0.5", pool.dataset_id
+    shares = [s["shard_fraction"] for s in pool.describe_sources()]
+    assert shares == [1.0, 0.5], shares
+    # Episodes of the two stay apart (the recording's index is part of the key).
+    assert len(np.unique(pool.episode_key)) > len(np.unique(whole.field("episode")))
+
+    # Recordings of other DLM parameters (one measure) do not train together.
+    import json
+    import shutil
+
+    params = {"measure": "route", "heading_start_m": 1.0, "heading_chord_m": 1.0, "turn_threshold_rad": 0.8,
+              "turn_release_rad": 0.6}
+    for name, release in (("a", 0.6), ("b", 0.3)):
+        copy = root.parent / name
+        shutil.copytree(root, copy)
+        index = json.loads((copy / "index.json").read_text())
+        index["dlm_params"] = {**params, "turn_release_rad": release}
+        (copy / "index.json").write_text(json.dumps(index))
+    assert len(data.Pool([str(root.parent / "a"), f"{root.parent / 'a'}@0.5"])) == 1060
+    try:
+        data.Pool([str(root.parent / "a"), str(root.parent / "b")])
+    except ValueError as e:
+        assert "turn_release_rad" in str(e) and "labelled alike" in str(e), e
+    else:
+        raise AssertionError("recordings of two DLM parameter sets were pooled")
+
+    for bad, says in (("0", "0.0"), ("1.5", "1.5"), ("half", "'half'")):
+        try:
+            dataset.load(f"{root}@{bad}")
+        except ValueError as e:
+            assert says in str(e) and "share" in str(e), e
+        else:
+            raise AssertionError(f"@{bad} was accepted")
+
+
+def main() -> None:
+    with tempfile.TemporaryDirectory(prefix="dataset-share-") as tmp:
+        root = Path(tmp) / "data"
+        write_synthetic(root)
+        check(root)
+    print("dataset share test passed")
+
+
+def test_dataset_share():
+    main()
+
+
+if __name__ == "__main__":
+    main()
