@@ -334,28 +334,33 @@ pub fn next_dlm_along(
                 (DlmMeasure::Route, Some(route)) => route,
                 _ => rest,
             };
-            let angle = heading_ahead_rad(measured, robot, params);
-            match previous {
-                Some(Dlm::TurnLeft) if angle >= params.turn_release_rad => Dlm::TurnLeft,
-                Some(Dlm::TurnRight) if angle <= -params.turn_release_rad => Dlm::TurnRight,
-                _ if angle >= params.turn_threshold_rad => Dlm::TurnLeft,
-                _ if angle <= -params.turn_threshold_rad => Dlm::TurnRight,
-                _ => Dlm::GoForward,
-            }
+            turn_by(
+                &[heading_ahead_rad(measured, robot, params)],
+                params,
+                previous,
+            )
         }
-        DlmMeasure::FirstTurn => {
-            let angles = piece_angles_rad(route.unwrap_or(rest), robot, params);
-            let first_past = |limit: f64| angles.iter().copied().find(|a| a.abs() >= limit);
-            match (previous, first_past(params.turn_release_rad)) {
-                (Some(Dlm::TurnLeft), Some(a)) if a > 0.0 => Dlm::TurnLeft,
-                (Some(Dlm::TurnRight), Some(a)) if a < 0.0 => Dlm::TurnRight,
-                _ => match first_past(params.turn_threshold_rad) {
-                    Some(a) if a > 0.0 => Dlm::TurnLeft,
-                    Some(_) => Dlm::TurnRight,
-                    None => Dlm::GoForward,
-                },
-            }
-        }
+        DlmMeasure::FirstTurn => turn_by(
+            &piece_angles_rad(route.unwrap_or(rest), robot, params),
+            params,
+            previous,
+        ),
+    }
+}
+
+/// The turn the measured `angles` (nearest first; one for the heading and route measures)
+/// call for: a turn holds while the first angle at or past `turn_release_rad` is on its side,
+/// and starts on the side of the first angle at or past `turn_threshold_rad`.
+fn turn_by(angles: &[f64], params: &DlmParams, previous: Option<Dlm>) -> Dlm {
+    let first_past = |limit: f64| angles.iter().copied().find(|a| a.abs() >= limit);
+    match (previous, first_past(params.turn_release_rad)) {
+        (Some(Dlm::TurnLeft), Some(a)) if a >= 0.0 => Dlm::TurnLeft,
+        (Some(Dlm::TurnRight), Some(a)) if a <= 0.0 => Dlm::TurnRight,
+        _ => match first_past(params.turn_threshold_rad) {
+            Some(a) if a >= 0.0 => Dlm::TurnLeft,
+            Some(_) => Dlm::TurnRight,
+            None => Dlm::GoForward,
+        },
     }
 }
 
