@@ -964,7 +964,7 @@ mod tests {
         let measure = |asked, model: Option<&std::path::Path>, over_card| {
             dlm_params_for(asked, model, over_card).map(|p| p.measure)
         };
-        // The shipped DLM-Net states every parameter (the route DLM); a card without them
+        // The shipped DLM-Net states every parameter (the first_turn DLM); a card without them
         // (the fixture, DLM-Net r1) means the defaults of the curvature DLM.
         let card = robot_agent::controllers::intention_net::read_card(&shipped).unwrap();
         assert_eq!(
@@ -973,20 +973,20 @@ mod tests {
         );
         assert_eq!(
             measure(None, Some(&shipped), false).unwrap(),
-            DlmMeasure::Route
+            DlmMeasure::FirstTurn
         );
         assert_eq!(
             dlm_params_for(None, Some(&fixture), false).unwrap(),
             planning::DlmParams::curvature()
         );
         assert_eq!(
-            measure(Some(DlmMeasure::Route), Some(&shipped), false).unwrap(),
-            DlmMeasure::Route
+            measure(Some(DlmMeasure::FirstTurn), Some(&shipped), false).unwrap(),
+            DlmMeasure::FirstTurn
         );
         let err = measure(Some(DlmMeasure::Curvature), Some(&shipped), false).unwrap_err();
         assert!(
             err.to_string().contains("--dlm-measure curvature")
-                && err.to_string().contains("the route DLM"),
+                && err.to_string().contains("the first_turn DLM"),
             "{err}"
         );
         // Unless told to drive it on another measure anyway.

@@ -179,10 +179,11 @@ fn bench_step(c: &mut Criterion) {
         cornered_stall_s: f64::INFINITY,
         ..RecoveryConfig::default()
     });
+    let goal = Some(protocol::Pose2D::new(near.x_m + 5.0, near.y_m, 0.0));
     group.bench_function("ahead_m_and_drive", |b| {
         b.iter(|| {
             let ahead = recovery::ahead_m(black_box(&near_scan));
-            black_box(rec.drive(0.1, near, 5.0, None, f64::INFINITY, ahead))
+            black_box(rec.drive(0.1, near, goal, None, f64::INFINITY, ahead))
         });
     });
     group.finish();

@@ -712,10 +712,7 @@ impl Supervisor {
             limits,
             dt_s: dt,
         };
-        let goal_m = intention
-            .path
-            .last()
-            .map_or(f64::INFINITY, |g| g.distance_m(&pose));
+        let goal = intention.path.last().copied();
         let monitor = &self.config.safety.collision_monitor;
         let tracking = self.give_way.is_some() || (monitor.enabled && monitor.track_movers);
         let held = match self.scan.as_ref().filter(|_| tracking) {
@@ -772,7 +769,7 @@ impl Supervisor {
                 .as_ref()
                 .map_or(f64::INFINITY, crate::recovery::ahead_m);
             self.recovery
-                .drive(dt, pose, goal_m, self.last_verdict, unmapped_m, ahead_m)
+                .drive(dt, pose, goal, self.last_verdict, unmapped_m, ahead_m)
         } else {
             Mode::Primary
         };

@@ -20,11 +20,12 @@
 //!   `turn_release_rad` on the same side (hysteresis, so the caller passes the previous DLM):
 //!   the route's direction a metre or two ahead, not where one point of it lies, so wiggles and
 //!   corner cuts of a few centimetres do not change it.
-//! - [`DlmMeasure::Route`] (the default, what the shipped DLM-Net was trained on): the heading
+//! - [`DlmMeasure::Route`] (what DLM-Net r2–r4 were trained on): the heading
 //!   measure's rule on the floor plan's route from the robot to the goal ([`super::route`])
 //!   instead of on the searched path, so the DLM does not depend on how a search bent (a kept
 //!   plan and a new search from one pose get the same DLM); `Stop` still comes from the path.
-//! - [`DlmMeasure::FirstTurn`]: the first turn on the floor plan's route. The route's first
+//! - [`DlmMeasure::FirstTurn`] (the default, what the shipped DLM-Net r5 was trained on): the
+//!   first turn on the floor plan's route. The route's first
 //!   `heading_start_m + heading_chord_m` are cut into pieces `heading_chord_m / 2` long, each
 //!   measured against the robot's heading; the first piece whose angle reaches
 //!   `turn_threshold_rad` decides the side, and a turn holds while the first piece at or past
@@ -51,10 +52,11 @@ pub enum DlmMeasure {
     /// (DLM-Net h1–d1, docs/evaluation.md rounds 8–9).
     Heading,
     /// The heading measure on the floor plan's route to the goal, not on the searched path
-    /// (the default since DLM-Net r2, docs/evaluation.md round 10).
-    #[default]
+    /// (DLM-Net r2–r4, docs/evaluation.md round 10).
     Route,
-    /// The first turn on the floor plan's route, piece by piece (see the module docs).
+    /// The first turn on the floor plan's route, piece by piece (see the module docs; the
+    /// default since DLM-Net r5, docs/evaluation.md round 21).
+    #[default]
     FirstTurn,
 }
 
@@ -123,7 +125,7 @@ pub struct DlmParams {
 impl Default for DlmParams {
     fn default() -> Self {
         Self {
-            measure: DlmMeasure::Route,
+            measure: DlmMeasure::FirstTurn,
             window_m: 1.5,
             curvature_threshold_per_m: 0.3,
             heading_start_m: 1.0,
@@ -418,11 +420,11 @@ mod tests {
     #[test]
     fn bad_params_name_the_field_and_value() {
         DlmParams::default().validate().unwrap();
-        assert_eq!(DlmParams::default().measure, DlmMeasure::Route);
+        assert_eq!(DlmParams::default().measure, DlmMeasure::FirstTurn);
         assert_eq!(
             DlmParams::default(),
             DlmParams {
-                measure: DlmMeasure::Route,
+                measure: DlmMeasure::FirstTurn,
                 ..DlmParams::heading()
             }
         );
