@@ -2,7 +2,8 @@
 # The training path's smoke tests, on the CPU (training/README.md): a tiny recording in the
 # format `eval record` writes -> `python -m training.train` for each kind -> ONNX export with its
 # card -> checked against ONNX Runtime; the layer-activation figure of the shipped models; and
-# the weight average of exported models (training/average.py) on the fixtures.
+# the weight average of exported models (training/average.py) on the fixtures; the card of a
+# DLM-Net driven on other DLM parameters than it was trained on (export --drive-dlm-params).
 # Installs PyTorch and the training dependencies into .venv first (scripts/setup.sh made it;
 # about 5 GB, most of it the CUDA libraries PyPI's wheel carries). Not part of the README's
 # test command: CI runs it after the Rust tests.
@@ -27,3 +28,4 @@ fi
 "$PY" training/tests/test_dataset.py
 "$PY" training/tests/test_average.py
 "$PY" training/tests/test_init_camera.py
+"$PY" training/tests/test_export_drive.py

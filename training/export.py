@@ -164,8 +164,27 @@ def closed_loop_summary(tables: list[str | Path], kind: str) -> str:
     return json.dumps({"tables": [str(t) for t in tables], "rows": rows}, separators=(",", ":"))
 
 
+def drive_dlm_with(card: dict[str, str], changes: dict) -> None:
+    """Makes the card's `dlm_params` (what `eval table`, `eval record --policy` and the fleet plan
+    the DLM with) differ from what the labels were derived with, which `dlm_params_trained`
+    keeps. Only keys the DLM has, and not the measure: a network fed another measure than it
+    was trained on is `--dlm-measure-over-card`, not a card."""
+    if card.get("kind") != "dlm":
+        raise SystemExit("--drive-dlm-params: only a DLM-Net's card has DLM parameters")
+    params = json.loads(card["dlm_params"])
+    for key, value in changes.items():
+        if key not in params or key == "measure":
+            raise SystemExit(f"--drive-dlm-params: {key!r} is not a DLM parameter this card can change "
+                             f"(one of {', '.join(k for k in sorted(params) if k != 'measure')})")
+        if not isinstance(value, (int, float)) or isinstance(value, bool) or not value > 0:
+            raise SystemExit(f"--drive-dlm-params: {key} = {value!r} is not a positive number")
+        params[key] = float(value)
+    card["dlm_params_trained"] = card["dlm_params"]
+    card["dlm_params"] = json.dumps(params, sort_keys=True, separators=(",", ":"))
+
+
 def export_checkpoint(checkpoint: str | Path, out: str | Path, max_mb: float = MAX_MB, card_json: str | Path | None = None,
-                      closed_loop: list[str | Path] | None = None) -> dict:
+                      closed_loop: list[str | Path] | None = None, drive_dlm_params: dict | None = None) -> dict:
     """Exports, checks and saves; returns {card, max_abs_diff, size_mb, check_inputs}."""
     ckpt = load_checkpoint(checkpoint)
     config = ckpt["model_config"]
@@ -174,6 +193,8 @@ def export_checkpoint(checkpoint: str | Path, out: str | Path, max_mb: float = M
     net.load_state_dict(ckpt["state_dict"])
     net.eval()
     card = card_for(ckpt)
+    if drive_dlm_params:
+        drive_dlm_with(card, drive_dlm_params)
     if closed_loop:
         card["closed_loop"] = closed_loop_summary(closed_loop, kind)
     card_mod.check(card)
@@ -236,11 +257,20 @@ def main(argv=None) -> int:
     p.add_argument("--card-json", help="also write the card (and the check's result) as JSON here")
     p.add_argument("--closed-loop", nargs="+", metavar="TABLE_JSON",
                    help="eval table results (table.json) whose rows for this network go into the card's closed_loop")
+    p.add_argument("--drive-dlm-params", metavar="JSON",
+                   help='DLM-Net: plan its DLM with these parameters, e.g. \'{"heading_start_m": 0.5}\', instead of the '
+                        "ones its labels were derived with (kept in the card as dlm_params_trained)")
     p.add_argument("--max-mb", type=float, default=MAX_MB, help="refuse a larger model (default %(default)s)")
     p.add_argument("--threads", type=int, default=2)
     args = p.parse_args(argv)
     torch.set_num_threads(args.threads)
-    export_checkpoint(args.checkpoint, args.out, args.max_mb, args.card_json, args.closed_loop)
+    try:
+        drive = json.loads(args.drive_dlm_params) if args.drive_dlm_params else None
+    except json.JSONDecodeError as e:
+        raise SystemExit(f"--drive-dlm-params: not JSON ({e}): {args.drive_dlm_params!r}") from e
+    if drive is not None and not isinstance(drive, dict):
+        raise SystemExit(f"--drive-dlm-params: a JSON object of DLM parameters, not {args.drive_dlm_params!r}")
+    export_checkpoint(args.checkpoint, args.out, args.max_mb, args.card_json, args.closed_loop, drive)
     return 0
 
 

@@ -845,9 +845,16 @@ fn the_first_turn_measure_turns_round_the_end_of_a_thin_wall() {
     let map = scenario_map("maze", &config);
     let goal = Pose2D::new(25.0, 17.2, 0.0);
     let dlm = |measure: DlmMeasure, robot: Pose2D| {
-        let params = DlmParams {
-            measure,
-            ..DlmParams::default()
+        // The route measure as r4 had it (its chord 1-2 m ahead); first_turn as deployed.
+        let params = match measure {
+            DlmMeasure::Route => DlmParams {
+                measure,
+                ..DlmParams::heading()
+            },
+            _ => DlmParams {
+                measure,
+                ..DlmParams::default()
+            },
         };
         let route = planning::intention::floor_plan_route(&map, robot, goal, 2.0).unwrap();
         planning::intention::next_dlm_along(&route, Some(&route), robot, &params, None)
