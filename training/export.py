@@ -23,6 +23,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # see train.py: shared core
 import argparse
 import io
 import json
+import math
 import sys
 import warnings
 from pathlib import Path
@@ -176,8 +177,13 @@ def drive_dlm_with(card: dict[str, str], changes: dict) -> None:
         if key not in params or key == "measure":
             raise SystemExit(f"--drive-dlm-params: {key!r} is not a DLM parameter this card can change "
                              f"(one of {', '.join(k for k in sorted(params) if k != 'measure')})")
-        if not isinstance(value, (int, float)) or isinstance(value, bool) or not value > 0:
-            raise SystemExit(f"--drive-dlm-params: {key} = {value!r} is not a positive number")
+        # The planner's DlmParams::validate: lengths of a window or chord must be positive, the
+        # rest may be 0 (first_turn measuring from the robot on: heading_start_m 0).
+        positive = key in ("window_m", "heading_chord_m")
+        if (not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value)
+                or (value <= 0 if positive else value < 0)):
+            raise SystemExit(f"--drive-dlm-params: {key} = {value!r} is not a "
+                             f"{'positive' if positive else 'non-negative'} number")
         params[key] = float(value)
     card["dlm_params_trained"] = card["dlm_params"]
     card["dlm_params"] = json.dumps(params, sort_keys=True, separators=(",", ":"))

@@ -43,7 +43,11 @@ def main() -> int:
     assert json.loads(driven["dlm_params_trained"]) == trained
     refused(card, {"measure": "route"}, "'measure'")
     refused(card, {"heading_start": 0.5}, "'heading_start'")
-    refused(card, {"heading_start_m": 0}, "heading_start_m = 0")
+    refused(card, {"heading_start_m": -0.5}, "heading_start_m = -0.5 is not a non-negative number")
+    refused(card, {"heading_chord_m": 0}, "heading_chord_m = 0 is not a positive number")
+    from_robot = dict(card)
+    drive_dlm_with(from_robot, {"heading_start_m": 0})
+    assert json.loads(from_robot["dlm_params"])["heading_start_m"] == 0.0
     refused(card, {"heading_start_m": "0.5"}, "heading_start_m = '0.5'")
     refused({"kind": "lpe"}, {"heading_start_m": 0.5}, "only a DLM-Net")
     print("export --drive-dlm-params: ok")
