@@ -1,8 +1,8 @@
 """Test of `python -m training.export --drive-dlm-params` (training/export.py `drive_dlm_with`):
 the card's `dlm_params` (what `eval table`, `eval record --policy` and the fleet plan the DLM
 with) take the changed keys, `dlm_params_trained` keeps what the labels were derived with; the
-measure, unknown keys, values that are not positive numbers and a card that is not a DLM-Net's
-are refused, naming the key or the value. On the shipped DLM-Net's card.
+measure, unknown keys, values the planner refuses (a negative length, a chord of 0, a string)
+and a card that is not a DLM-Net's are refused, naming the key or the value. On the shipped DLM-Net's card.
 
     .venv/bin/python training/tests/test_export_drive.py
 """

@@ -133,7 +133,7 @@ impl Default for DlmParams {
             // first_turn measures the route's first metre: told a turn 2 m ahead, DLM-Net r5
             // turned before the door or wall end it had to pass first (docs/evaluation.md,
             // rounds 21-22: 1.38 interventions per run at 2 m, 0.73 at 1.5 m, 0.42 at 1.25 m,
-            // 0.19 at 1 m).
+            // 0.21 at 1 m).
             heading_start_m: 0.0,
             heading_chord_m: 1.0,
             turn_threshold_rad: 0.8,
@@ -521,7 +521,7 @@ mod tests {
 
     #[test]
     fn first_turn_measure_takes_the_nearest_turn_and_holds_it_round_a_hairpin() {
-        // 2 m ahead in four pieces, as DLM-Net r5 was trained on (the default drives 1.5 m).
+        // 2 m ahead in four pieces, as DLM-Net r5 was trained on (the default drives 1 m).
         let params = DlmParams {
             measure: DlmMeasure::FirstTurn,
             heading_start_m: 1.0,
