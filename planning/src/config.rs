@@ -51,6 +51,10 @@ pub struct PlannerConfig {
     pub analytic_expansion_every: u32,
     /// ... and on every expansion closer than this to the goal (obstacle heuristic distance).
     pub analytic_near_goal_m: f64,
+    /// Within two turning radii of the goal also try a turn in place to face it and a straight
+    /// line to it (with `allow_turn_in_place`), taken where it costs less than the Dubins shot:
+    /// a goal beside or behind the robot, which the Dubins curve loops round.
+    pub analytic_turn_straight: bool,
     /// Goal reached when the position is within this distance.
     pub goal_position_tolerance_m: f64,
     /// ... and the heading within this angle (or the robot can turn in place to it).
@@ -87,6 +91,7 @@ impl Default for PlannerConfig {
             heuristic_cache_size: 320,
             analytic_expansion_every: 8,
             analytic_near_goal_m: 4.0,
+            analytic_turn_straight: true,
             goal_position_tolerance_m: 0.1,
             goal_yaw_tolerance_rad: 0.1,
             time_budget_ms: 1000,

@@ -8,7 +8,10 @@
 //! max(non-holonomic distance without obstacles, 2-D distance with obstacles); the latter is
 //! the per-goal cached [`super::heuristic::ObstacleHeuristic`]. Analytic expansion tries a
 //! collision-checked Dubins curve to the goal every `analytic_expansion_every` expansions and
-//! on every expansion near the goal. The result is shortcut-smoothed ([`super::smoother`]).
+//! on every expansion near the goal; within two turning radii of it, with turns in place
+//! allowed, also a turn to face the goal and a straight line to it, taken where it costs less
+//! than the curve (a goal beside or behind the robot, which a Dubins curve loops round). The
+//! result is shortcut-smoothed ([`super::smoother`]).
 //!
 //! A [`Planner`] is one robot's reusable state (node, open and closed buffers keep their
 //! capacity between plans); the [`PlanningMap`] it plans on is shared between robots and
@@ -114,6 +117,21 @@ enum Ending {
     NodeThenRotate(usize),
     /// A collision-free Dubins curve from the node reaches the goal exactly.
     Analytic(usize, DubinsPath),
+    /// From the node: a turn in place to face the goal, a straight line to it, and a turn in
+    /// place to the goal heading where that is outside the tolerance.
+    TurnStraight(usize, TurnStraight),
+}
+
+/// The turn–straight–turn connection of [`Ending::TurnStraight`].
+#[derive(Debug, Clone, Copy)]
+struct TurnStraight {
+    /// Heading of the straight line (grid frame).
+    bearing_rad: f64,
+    length_m: f64,
+    /// The final turn in place; zero within the goal heading tolerance.
+    final_turn_rad: f64,
+    /// In the search's metres: turns at `turn_in_place_cost_m_per_rad`, the line at 1.
+    cost_m: f64,
 }
 
 /// One robot's planner (see the module docs).
@@ -297,7 +315,7 @@ impl Planner {
         let settled = heur.settled();
         drop(heur);
 
-        let analytic = matches!(ending, Ending::Analytic(..));
+        let analytic = matches!(ending, Ending::Analytic(..) | Ending::TurnStraight(..));
         let mut grid_poses = self.reconstruct(&ending, g);
         let raw_length_m = grid_length(&grid_poses);
         if self.config.smooth {
@@ -321,7 +339,13 @@ impl Planner {
         if let Some(first) = poses.first_mut() {
             *first = Pose2D::new(start.x_m, start.y_m, normalize_angle(start.yaw_rad));
         }
-        if analytic || matches!(ending, Ending::NodeThenRotate(_)) {
+        let exact_heading = match ending {
+            Ending::Node(_) => false,
+            Ending::NodeThenRotate(_) | Ending::Analytic(..) => true,
+            // Within the heading tolerance it arrives along its line.
+            Ending::TurnStraight(_, t) => t.final_turn_rad != 0.0,
+        };
+        if exact_heading {
             if let Some(last) = poses.last_mut() {
                 if last.distance_m(&goal) < 1e-6 {
                     *last = Pose2D::new(goal.x_m, goal.y_m, normalize_angle(goal.yaw_rad));
@@ -426,11 +450,10 @@ impl Planner {
             }
 
             // Analytic expansion.
-            if expanded % u64::from(self.config.analytic_expansion_every) == 1
-                || n.h_obstacle < self.config.analytic_near_goal_m
-            {
-                if let Some(d) = DubinsPath::shortest((n.x, n.y, n.yaw), goal_q, rho) {
-                    let free = self.map.curve_free_among(
+            let near_goal = n.h_obstacle < self.config.analytic_near_goal_m;
+            if expanded % u64::from(self.config.analytic_expansion_every) == 1 || near_goal {
+                let dubins = DubinsPath::shortest((n.x, n.y, n.yaw), goal_q, rho).filter(|d| {
+                    self.map.curve_free_among(
                         &self.avoid,
                         d.length_m(),
                         self.config.path_spacing_m,
@@ -438,10 +461,21 @@ impl Planner {
                             let q = d.sample(t);
                             (q.0, q.1)
                         },
-                    );
-                    if free {
-                        return Ok((Ending::Analytic(ni, d), expanded));
-                    }
+                    )
+                });
+                // Near the goal a differential drive can also turn to face it and drive
+                // straight there: where that costs less than the Dubins curve (a goal beside
+                // or behind the robot, closer than a turning circle), the curve would loop
+                // round it (task B's last goal, passed 0.4 m to its side: a 4 m loop).
+                let turn_straight = near_goal
+                    .then(|| self.turn_straight(&n, goal))
+                    .flatten()
+                    .filter(|t| dubins.as_ref().is_none_or(|d| t.cost_m < d.length_m()));
+                if let Some(t) = turn_straight {
+                    return Ok((Ending::TurnStraight(ni, t), expanded));
+                }
+                if let Some(d) = dubins {
+                    return Ok((Ending::Analytic(ni, d), expanded));
                 }
             }
 
@@ -526,10 +560,52 @@ impl Planner {
         })
     }
 
+    /// The [`TurnStraight`] connection from node `n` to `goal` when turns in place and the
+    /// connection are allowed (`analytic_turn_straight`), the goal is within two turning radii
+    /// and the straight line is free.
+    fn turn_straight(&self, n: &Node, goal: GridPose) -> Option<TurnStraight> {
+        let c = &self.config;
+        let length_m = (goal.x_m - n.x).hypot(goal.y_m - n.y);
+        // Only within a turning circle's width of the goal, where a curve would loop: further
+        // out a straight shot cuts past door frames and the planning map's unseen glass at
+        // the robot's bare radius where the search's path keeps to the middle (the dynamic
+        // window on task B: 12 glass contacts in 20 runs with shots from 4 m, 4 without).
+        if !(c.allow_turn_in_place && c.analytic_turn_straight)
+            || length_m < 1e-6
+            || length_m > 2.0 * c.min_turning_radius_m
+        {
+            return None;
+        }
+        let bearing_rad = (goal.y_m - n.y).atan2(goal.x_m - n.x);
+        let first_turn_rad = normalize_angle(bearing_rad - n.yaw);
+        let final_turn_rad = normalize_angle(goal.yaw_rad - bearing_rad);
+        let final_turn_rad = if final_turn_rad.abs() <= c.goal_yaw_tolerance_rad {
+            0.0
+        } else {
+            final_turn_rad
+        };
+        let (cos, sin) = (bearing_rad.cos(), bearing_rad.sin());
+        self.map
+            .curve_free_among(&self.avoid, length_m, c.path_spacing_m, |t| {
+                (n.x + t * cos, n.y + t * sin)
+            })
+            .then_some(TurnStraight {
+                bearing_rad,
+                length_m,
+                final_turn_rad,
+                cost_m: length_m
+                    + c.turn_in_place_cost_m_per_rad
+                        * (first_turn_rad.abs() + final_turn_rad.abs()),
+            })
+    }
+
     /// Grid-frame poses from the start to the end of the search, `path_spacing_m` apart.
     fn reconstruct(&self, ending: &Ending, goal: GridPose) -> Vec<GridPose> {
         let last = match ending {
-            Ending::Node(i) | Ending::NodeThenRotate(i) | Ending::Analytic(i, _) => *i,
+            Ending::Node(i)
+            | Ending::NodeThenRotate(i)
+            | Ending::Analytic(i, _)
+            | Ending::TurnStraight(i, _) => *i,
         };
         let mut chain = Vec::new();
         let mut i = last;
@@ -573,17 +649,22 @@ impl Planner {
         }
         match ending {
             Ending::Node(_) => {}
-            Ending::NodeThenRotate(_) => {
+            Ending::NodeThenRotate(_) => turn_in_place(&mut out, goal, goal.yaw_rad),
+            Ending::TurnStraight(_, t) => {
+                turn_in_place(&mut out, goal, t.bearing_rad);
                 let from = out.last().copied().unwrap_or(goal);
-                let d = normalize_angle(goal.yaw_rad - from.yaw_rad);
-                let steps = (d.abs() / ROTATION_SAMPLE_RAD).ceil().max(1.0);
+                let steps = (t.length_m / spacing).ceil().max(1.0);
                 #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
                 for j in 1..=(steps as u32) {
+                    let s = t.length_m * f64::from(j) / steps;
                     out.push(GridPose {
-                        x_m: from.x_m,
-                        y_m: from.y_m,
-                        yaw_rad: normalize_angle(from.yaw_rad + d * f64::from(j) / steps),
+                        x_m: from.x_m + s * t.bearing_rad.cos(),
+                        y_m: from.y_m + s * t.bearing_rad.sin(),
+                        yaw_rad: t.bearing_rad,
                     });
+                }
+                if t.final_turn_rad != 0.0 {
+                    turn_in_place(&mut out, goal, goal.yaw_rad);
                 }
             }
             Ending::Analytic(_, d) => {
@@ -601,6 +682,27 @@ impl Planner {
             }
         }
         out
+    }
+}
+
+/// Appends a turn in place from the last pose of `out` (`fallback` when empty) to `yaw_rad`,
+/// at most 0.9 [`ROTATION_SAMPLE_RAD`] apart: centring may later bend the heading of the pose
+/// the turn starts from by a little (a straight line moved off a wall), and the turn's first
+/// step must stay within the sample.
+fn turn_in_place(out: &mut Vec<GridPose>, fallback: GridPose, yaw_rad: f64) {
+    let from = out.last().copied().unwrap_or(fallback);
+    let d = normalize_angle(yaw_rad - from.yaw_rad);
+    if d == 0.0 {
+        return;
+    }
+    let steps = (d.abs() / (0.9 * ROTATION_SAMPLE_RAD)).ceil().max(1.0);
+    #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+    for j in 1..=(steps as u32) {
+        out.push(GridPose {
+            x_m: from.x_m,
+            y_m: from.y_m,
+            yaw_rad: normalize_angle(from.yaw_rad + d * f64::from(j) / steps),
+        });
     }
 }
 

@@ -332,3 +332,74 @@ fn many_threads_share_one_map() {
     }
     assert!(map.cache_stats().hits > 0);
 }
+
+/// Task B's office floor plan (the simulator's scenarios).
+fn office() -> map_core::OccupancyGrid {
+    let path = test_support::scenarios_dir()
+        .join("maps")
+        .join("office.yaml");
+    map_core::load_ros_map(&path, &map_core::ImportLimits::default())
+        .unwrap()
+        .grid
+}
+
+#[test]
+fn a_goal_beside_the_robot_is_reached_by_turning_to_it_not_by_a_loop() {
+    // Task B's last goal (30, 16), in the open lobby: the robot drove north past it 0.39 m to
+    // its west. The Dubins curve to it loops a turning circle round (2026-11-29: 4 m, and the
+    // robot followed it round until the person watching intervened).
+    let start = Pose2D::new(29.61, 16.02, 1.57);
+    for (tolerance_rad, final_turn) in [(std::f64::consts::PI, false), (0.1, true)] {
+        let cfg = PlannerConfig {
+            goal_yaw_tolerance_rad: tolerance_rad,
+            ..PlannerConfig::default()
+        };
+        let map = Arc::new(PlanningMap::new(office(), &cfg).unwrap());
+        let goal = Pose2D::new(30.0, 16.0, 0.74);
+        let path = Planner::new(Arc::clone(&map), cfg.clone())
+            .unwrap()
+            .plan(start, goal)
+            .unwrap();
+        check_path(&map, &cfg, &path, start, goal);
+        assert!(
+            path.length_m < 0.45,
+            "{} m: {:?}",
+            path.length_m,
+            path.poses
+        );
+        // It turns on the spot first, clockwise to face the goal ...
+        let moves = path
+            .poses
+            .iter()
+            .position(|p| p.distance_m(&start) > 1e-6)
+            .unwrap();
+        let faced = path.poses[moves - 1].yaw_rad;
+        assert!((faced - (-0.05)).abs() < 0.1, "faces the goal: {faced}");
+        // ... and turns to the goal's heading only where it has one.
+        let last = path.poses[path.poses.len() - 1];
+        let turned_at_goal = path.poses[path.poses.len() - 2].distance_m(&last) < 1e-9;
+        assert_eq!(turned_at_goal, final_turn, "{:?}", &path.poses[moves..]);
+    }
+    // Without the connection, the Dubins shot loops round.
+    let cfg = PlannerConfig {
+        goal_yaw_tolerance_rad: std::f64::consts::PI,
+        analytic_turn_straight: false,
+        ..PlannerConfig::default()
+    };
+    let map = Arc::new(PlanningMap::new(office(), &cfg).unwrap());
+    let path = Planner::new(Arc::clone(&map), cfg.clone())
+        .unwrap()
+        .plan(start, Pose2D::new(30.0, 16.0, 0.74))
+        .unwrap();
+    assert!(path.length_m > 2.0, "{} m", path.length_m);
+    // Ahead of the robot, 4 m on: the smooth curve, no turn in place.
+    let cfg = PlannerConfig::default();
+    let map = Arc::new(PlanningMap::new(office(), &cfg).unwrap());
+    let (start, goal) = (Pose2D::new(29.0, 12.5, 0.3), Pose2D::new(32.5, 13.5, 0.2));
+    let path = Planner::new(Arc::clone(&map), cfg.clone())
+        .unwrap()
+        .plan(start, goal)
+        .unwrap();
+    check_path(&map, &cfg, &path, start, goal);
+    assert!(path.poses.windows(2).all(|w| w[0].distance_m(&w[1]) > 1e-6));
+}

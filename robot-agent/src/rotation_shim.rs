@@ -22,7 +22,7 @@
 use protocol::{normalize_angle, Pose2D};
 
 use crate::config::ConfigError;
-use crate::controllers::path_tracker::check_positive;
+use crate::controllers::path_tracker::{check_non_negative, check_positive};
 
 /// The `[rotation_shim]` table.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -43,6 +43,11 @@ pub struct RotationShimConfig {
     pub release_rad: f64,
     /// Turn rate on the spot (within the limits' turn rate).
     pub rotate_to_heading_radps: f64,
+    /// Within this much path of its end (the goal) the shim takes over from
+    /// `angular_dist_threshold_rad` at any speed, and turns towards the goal itself once the
+    /// path is shorter than `forward_sampling_distance_m`: a robot that drove past the goal a
+    /// little to its side turns to it on the spot instead of looping round. 0: never.
+    pub goal_near_m: f64,
 }
 
 impl Default for RotationShimConfig {
@@ -55,6 +60,7 @@ impl Default for RotationShimConfig {
             behind_rad: 2.0,
             release_rad: 0.35,
             rotate_to_heading_radps: 1.0,
+            goal_near_m: 1.0,
         }
     }
 }
@@ -82,6 +88,7 @@ impl RotationShimConfig {
                 self.rotate_to_heading_radps,
             ),
         ])?;
+        check_non_negative(&[("rotation_shim.goal_near_m", self.goal_near_m)])?;
         let invalid = |field, v: f64, reason| {
             Err(ConfigError::Invalid {
                 field,
@@ -121,6 +128,9 @@ const NEAREST_WINDOW_M: f64 = 1.5;
 /// Below this heading error the turn rate falls off in proportion, so the turn ends without
 /// overshooting.
 const SLOWDOWN_RAD: f64 = 0.6;
+/// Closer to the goal than this its bearing is noise (and the goal is reached: the fleet's
+/// tolerance is 0.35 m).
+const GOAL_BEARING_MIN_M: f64 = 0.1;
 /// Slowest turn rate on the spot (static friction, and a turn that ends).
 const MIN_TURN_RADPS: f64 = 0.25;
 
@@ -170,15 +180,19 @@ impl RotationShim {
         max_turn_radps: f64,
     ) -> Option<(f64, f64)> {
         let c = self.config;
+        let near_goal = path_left_m(pose, path) < c.goal_near_m;
         let Some(error) = c
             .enabled
-            .then(|| heading_error_rad(pose, path, c.forward_sampling_distance_m))
+            .then(|| {
+                heading_error_rad(pose, path, c.forward_sampling_distance_m)
+                    .or_else(|| near_goal.then(|| goal_error_rad(pose, path)).flatten())
+            })
             .flatten()
         else {
             self.turning = false;
             return None;
         };
-        let engage = if v_mps.abs() < c.engage_below_mps {
+        let engage = if near_goal || v_mps.abs() < c.engage_below_mps {
             c.angular_dist_threshold_rad
         } else {
             c.behind_rad
@@ -207,7 +221,7 @@ impl RotationShim {
 
 /// The signed angle (radians, counter-clockwise positive) from the robot's heading to the
 /// direction of the path point `ahead_m` along from the robot's nearest point; `None` when the
-/// path ends closer than that (the goal is near: the controller's and the recovery's business).
+/// path ends closer than that (the goal is near: see [`goal_error_rad`]).
 #[must_use]
 pub fn heading_error_rad(pose: Pose2D, path: &[Pose2D], ahead_m: f64) -> Option<f64> {
     if path.len() < 2 {
@@ -218,6 +232,26 @@ pub fn heading_error_rad(pose: Pose2D, path: &[Pose2D], ahead_m: f64) -> Option<
         .find(|p| p.distance_m(&pose) >= ahead_m)?;
     let bearing = (target.y_m - pose.y_m).atan2(target.x_m - pose.x_m);
     Some(normalize_angle(bearing - pose.yaw_rad))
+}
+
+/// The signed angle from the robot's heading to the direction of the path's end (the goal);
+/// `None` for a path of fewer than two poses or an end within [`GOAL_BEARING_MIN_M`].
+fn goal_error_rad(pose: Pose2D, path: &[Pose2D]) -> Option<f64> {
+    let goal = path.get(1..)?.last()?;
+    (goal.distance_m(&pose) >= GOAL_BEARING_MIN_M)
+        .then(|| normalize_angle((goal.y_m - pose.y_m).atan2(goal.x_m - pose.x_m) - pose.yaw_rad))
+}
+
+/// The length of `path` from the robot's nearest point to its end (infinite for a path of
+/// fewer than two poses: no goal to be near).
+fn path_left_m(pose: Pose2D, path: &[Pose2D]) -> f64 {
+    if path.len() < 2 {
+        return f64::INFINITY;
+    }
+    path[nearest_index(pose, path)..]
+        .windows(2)
+        .map(|w| w[0].distance_m(&w[1]))
+        .sum()
 }
 
 /// The index of the path pose nearest to `pose` among those within [`NEAREST_WINDOW_M`] of the
@@ -294,8 +328,48 @@ mod tests {
     }
 
     #[test]
-    fn stays_out_near_the_goal_and_when_off() {
+    fn turns_to_a_goal_passed_to_its_side_instead_of_looping_round() {
+        // Task B's last goal (2026-11-29): the robot drove north past it 0.39 m to its west at
+        // 0.58 m/s, its path now 0.39 m east; DLM-Net looped a 1.5 m circle round and the
+        // person watching intervened after 10 s without progress.
         let mut shim = RotationShim::new(RotationShimConfig::default());
+        let path = vec![Pose2D::new(29.61, 16.02, 0.0), Pose2D::new(30.0, 16.0, 0.0)];
+        let mut pose = Pose2D::new(29.61, 16.02, 1.57);
+        let (v, w) = shim
+            .command(pose, 0.58, &path, 1.2)
+            .expect("turns at speed");
+        assert_eq!(v, 0.0);
+        assert!(w < -0.9, "clockwise, towards the goal: {w}");
+        let mut cycles = 0;
+        while let Some((_, w)) = shim.command(pose, 0.0, &path, 1.2) {
+            pose.yaw_rad = normalize_angle(pose.yaw_rad + 0.1 * w);
+            cycles += 1;
+            assert!(cycles < 100, "the turn ends");
+        }
+        assert!(
+            pose.yaw_rad.abs() <= 0.35,
+            "faces the goal: {}",
+            pose.yaw_rad
+        );
+        // Facing it and on the goal itself: nothing to turn to.
+        assert!(shim.command(pose, 0.0, &path, 1.2).is_none());
+        let at_goal = Pose2D::new(29.95, 16.0, 2.0);
+        assert!(shim.command(at_goal, 0.0, &path, 1.2).is_none());
+        // Far from the goal a path beside the robot is a corner being rounded: left alone.
+        let mut long = vec![Pose2D::new(29.61, 16.02, 0.0)];
+        long.extend((1..20).map(|i| Pose2D::new(29.61 + 0.2 * f64::from(i), 16.0, 0.0)));
+        let mut fresh = RotationShim::new(RotationShimConfig::default());
+        assert!(fresh
+            .command(Pose2D::new(29.61, 16.02, 1.57), 0.58, &long, 1.2)
+            .is_none());
+    }
+
+    #[test]
+    fn stays_out_near_the_goal_when_told_and_when_off() {
+        let mut shim = RotationShim::new(RotationShimConfig {
+            goal_near_m: 0.0,
+            ..RotationShimConfig::default()
+        });
         let pose = Pose2D::new(0.0, 0.0, std::f64::consts::PI);
         // The path ends within the sampling distance: the goal is the controller's business.
         assert!(shim.command(pose, 0.0, &east(0.0, 3), 1.2).is_none());

@@ -113,6 +113,10 @@ pub struct Person {
     /// Index of the route point being walked to.
     target: usize,
     forward: bool,
+    /// The sense (+1 anticlockwise, -1 clockwise) in which the person is walking round a robot
+    /// in the way, kept until the route is free again (choosing afresh each step would undo
+    /// the last one).
+    rounding: Option<f64>,
 }
 
 impl Person {
@@ -152,21 +156,33 @@ impl Person {
             dist -= d;
             x = tx;
             y = ty;
-            match self.mode {
-                RouteMode::Loop => target = (target + 1) % n,
-                RouteMode::PingPong => {
-                    if forward && target + 1 == n {
-                        forward = false;
-                    } else if !forward && target == 0 {
-                        forward = true;
-                    }
-                    target = if forward { target + 1 } else { target - 1 };
-                }
-            }
+            (target, forward) = self.after(target, forward);
         }
         (x, y, target, forward)
     }
+
+    /// The route point walked to after route point `target` (walking `forward`), for a route
+    /// of at least two points.
+    fn after(&self, target: usize, forward: bool) -> (usize, bool) {
+        let n = self.route.len();
+        match self.mode {
+            RouteMode::Loop => ((target + 1) % n, forward),
+            RouteMode::PingPong => {
+                let forward = if forward && target + 1 == n {
+                    false
+                } else if !forward && target == 0 {
+                    true
+                } else {
+                    forward
+                };
+                (if forward { target + 1 } else { target - 1 }, forward)
+            }
+        }
+    }
 }
+
+/// A robot slower than this stands, for the people walking round it or turning short of it.
+const STANDING_MPS: f64 = 0.05;
 
 /// One simulated robot's state.
 #[derive(Debug, Clone)]
@@ -332,6 +348,7 @@ impl World {
                     speed_mps: p.speed_mps,
                     mode: p.mode,
                     forward: true,
+                    rounding: None,
                 }
             })
             .collect();
@@ -559,14 +576,27 @@ impl World {
             let near_robot = |x: f64, y: f64| {
                 self.robots
                     .iter()
-                    .map(|r| (r.pose.x_m, r.pose.y_m))
+                    .map(|r| (r.pose.x_m, r.pose.y_m, r.v_mps.abs() < STANDING_MPS))
                     .find(|r| (r.0 - x).hypot(r.1 - y) < p.radius_m + rr + 0.05)
             };
-            let (x, y, target, forward) = match near_robot(x, y) {
-                None => (x, y, target, forward),
-                // A robot in the way: step aside, away from it, where nothing else is, and walk
-                // on from there (the route leads back to its next point). Merely waiting would
-                // deadlock against a robot that waits for the person to pass.
+            let (x, y, target, forward, rounding) = match near_robot(x, y) {
+                None => (x, y, target, forward, None),
+                // A robot in the way: step aside, away from it, where nothing else is, or walk
+                // round it, and walk on from there (the route leads back to its next point).
+                // Merely waiting would deadlock against a robot that waits for the person to
+                // pass.
+                // A route point a robot stands on is taken as reached: the person turns to the
+                // next one (walking round the robot to it would never end; task D's first
+                // person turns at (25.5, 13.0), where the robot passes).
+                Some(r)
+                    if r.2
+                        && p.route.len() > 1
+                        && (p.route[p.target].0 - r.0).hypot(p.route[p.target].1 - r.1)
+                            < p.radius_m + rr + 0.05 =>
+                {
+                    let (target, forward) = p.after(p.target, p.forward);
+                    (p.x_m, p.y_m, target, forward, None)
+                }
                 Some(r) => {
                     let (dx, dy) = (x - p.x_m, y - p.y_m);
                     let len = dx.hypot(dy);
@@ -594,9 +624,44 @@ impl World {
                         ),
                         (p.x_m + nx * step_m, p.y_m + ny * step_m),
                     ];
+                    // Where a wall stops the side-step (met in a corridor, the robot on the
+                    // person's open side), walk round a standing robot along its circle, the
+                    // way that leads on first. Standing instead deadlocked 5 of task B's 20
+                    // runs: the person pressed to the wall just ahead of the robot's flank,
+                    // the robot's monitor refusing every motion that brings it closer. A
+                    // robot driving at someone is not dodged: avoiding people is its job
+                    // (the behaviour scenarios' oncoming person).
+                    let (rx, ry) = (p.x_m - r.0, p.y_m - r.1);
+                    // At least as far out as a person keeps from a robot (one that drove up
+                    // closer is stepped back from), and a hair more, so that rounding never
+                    // takes a step for one closer in.
+                    let d = rx.hypot(ry).max(p.radius_m + rr + 0.05) + 1e-3;
+                    let angle = ry.atan2(rx);
+                    let round = |sense: f64| {
+                        let a = angle + sense * step_m / d;
+                        (r.0 + d * a.cos(), r.1 + d * a.sin(), Some(sense))
+                    };
+                    let on = |q: &(f64, f64, Option<f64>)| (q.0 - p.x_m) * ux + (q.1 - p.y_m) * uy;
+                    let sideways = sideways.map(|(x, y)| (x, y, None));
+                    // Once on the way round, on round (a side-step back would undo each step
+                    // of it), turned back only where that way is blocked.
+                    let (first, last) = match (r.2, p.rounding) {
+                        (false, _) => (None, [None, None]),
+                        (true, Some(sense)) => (Some(round(sense)), [Some(round(-sense)), None]),
+                        (true, None) => {
+                            let (a, b) = (round(1.0), round(-1.0));
+                            let (a, b) = if on(&b) > on(&a) { (b, a) } else { (a, b) };
+                            (None, [Some(a), Some(b)])
+                        }
+                    };
                     // The route point being walked to stays the same: it was not reached.
-                    match sideways.into_iter().find(|&(x, y)| free(x, y)) {
-                        Some((x, y)) => (x, y, p.target, p.forward),
+                    match first
+                        .into_iter()
+                        .chain(sideways)
+                        .chain(last.into_iter().flatten())
+                        .find(|&(x, y, _)| free(x, y))
+                    {
+                        Some((x, y, sense)) => (x, y, p.target, p.forward, sense.or(p.rounding)),
                         None => continue,
                     }
                 }
@@ -607,6 +672,7 @@ impl World {
             p.y_m = y;
             p.target = target;
             p.forward = forward;
+            p.rounding = rounding;
         }
     }
 

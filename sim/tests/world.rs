@@ -549,6 +549,17 @@ fn rotated_nav2_plan_lidar_matches_distance_field() {
     assert_eq!(world.render_camera(0).unwrap().data.len(), 224 * 224 * 3);
 }
 
+/// One 0.1 s step of a world with one robot standing still and a person walking: neither
+/// touches anything nor comes closer than touching. The person's position and the robot's pose.
+fn step_standing_robot(w: &mut World) -> ((f64, f64), Pose2D) {
+    let obs = w.step(&[], 0.1);
+    assert!(obs.robots[0].collisions.is_empty());
+    let p = &w.people[0];
+    let r = w.ground_truth_pose(0).unwrap();
+    assert!((p.x_m - r.x_m).hypot(p.y_m - r.y_m) >= p.radius_m + 0.25 - 1e-9);
+    ((p.x_m, p.y_m), r)
+}
+
 #[test]
 fn a_person_steps_around_a_robot_standing_in_the_way() {
     // Task A's person walks along y = 10 from x = 5 to 21; a robot stands on the route.
@@ -559,14 +570,66 @@ fn a_person_steps_around_a_robot_standing_in_the_way() {
     assert!(x0 < 8.0, "{x0}");
     let mut passed = false;
     for _ in 0..200 {
-        let obs = w.step(&[], 0.1);
-        assert!(obs.robots[0].collisions.is_empty());
-        let p = &w.people[0];
-        let r = w.ground_truth_pose(0).unwrap();
-        assert!((p.x_m - r.x_m).hypot(p.y_m - r.y_m) >= p.radius_m + 0.25 - 1e-9);
-        passed |= p.x_m > 11.0;
+        let ((x_m, _), _) = step_standing_robot(&mut w);
+        passed |= x_m > 11.0;
     }
     assert!(passed, "the person never got past the robot");
+}
+
+#[test]
+fn a_person_pressed_to_a_wall_by_a_robot_walks_round_it() {
+    // Task B's first person walks the 2 m corridor (y 9-11) east along y = 9.7. A robot stands
+    // just north of that line: the person's side-step away from it ends at the wall with no
+    // room to pass, so the only way on is round the robot's open north side (where task B's
+    // deployed runs stood deadlocked, 2026-11-29).
+    let mut w = world("task_b");
+    w.add_robot(id("robot_1"), Pose2D::new(10.0, 9.72, 0.5))
+        .unwrap();
+    assert!(w.people[0].x_m < 4.0);
+    let mut passed_at = None;
+    let mut north_m = f64::NEG_INFINITY;
+    for step in 0..400 {
+        let ((x_m, y_m), r) = step_standing_robot(&mut w);
+        if (x_m - r.x_m).abs() < 0.1 {
+            north_m = north_m.max(y_m);
+        }
+        if x_m > 11.0 {
+            passed_at = Some(step);
+            break;
+        }
+    }
+    let step = passed_at.expect("the person never got past the robot");
+    assert!(
+        north_m > 10.25,
+        "passed the robot at y {north_m}, not round its north side"
+    );
+    // 7 m to the robot and 1 m on at 0.7 m/s is 11.4 s; the way round adds a few seconds.
+    assert!(step < 250, "took {step} steps");
+}
+
+#[test]
+fn a_person_turns_back_short_of_a_route_end_a_robot_stands_on() {
+    // Task D's first person walks y = 13 between x = 10 and 25.5; a robot stands on the east
+    // end (where task D's robot stood, person and robot each waiting for the other, 2026-11-29).
+    let mut w = world("task_d");
+    w.add_robot(id("robot_1"), Pose2D::new(25.6, 13.0, 3.0))
+        .unwrap();
+    let mut furthest_m = f64::NEG_INFINITY;
+    let mut back_at = None;
+    for step in 0..600 {
+        let ((x_m, _), _) = step_standing_robot(&mut w);
+        furthest_m = furthest_m.max(x_m);
+        if furthest_m > 24.0 && x_m < 20.0 {
+            back_at = Some(step);
+            break;
+        }
+    }
+    assert!(
+        back_at.is_some(),
+        "the person never turned back (got to x {furthest_m})"
+    );
+    // It turned where the robot stopped it, not after walking round it.
+    assert!(furthest_m < 25.1, "walked on to x {furthest_m}");
 }
 
 #[test]
