@@ -573,18 +573,16 @@ impl World {
             let step_m = p.speed_mps * dt;
             let (x, y, target, forward) = p.advanced(step_m);
             // People do not walk into a robot: the robot's collisions are its own doing.
+            // How close, centre to centre, a person comes to a robot.
+            let keep_m = p.radius_m + rr + 0.05;
             let near_robot = |x: f64, y: f64| {
                 self.robots
                     .iter()
                     .map(|r| (r.pose.x_m, r.pose.y_m, r.v_mps.abs() < STANDING_MPS))
-                    .find(|r| (r.0 - x).hypot(r.1 - y) < p.radius_m + rr + 0.05)
+                    .find(|r| (r.0 - x).hypot(r.1 - y) < keep_m)
             };
             let (x, y, target, forward, rounding) = match near_robot(x, y) {
                 None => (x, y, target, forward, None),
-                // A robot in the way: step aside, away from it, where nothing else is, or walk
-                // round it, and walk on from there (the route leads back to its next point).
-                // Merely waiting would deadlock against a robot that waits for the person to
-                // pass.
                 // A route point a robot stands on is taken as reached: the person turns to the
                 // next one (walking round the robot to it would never end; task D's first
                 // person turns at (25.5, 13.0), where the robot passes).
@@ -592,11 +590,15 @@ impl World {
                     if r.2
                         && p.route.len() > 1
                         && (p.route[p.target].0 - r.0).hypot(p.route[p.target].1 - r.1)
-                            < p.radius_m + rr + 0.05 =>
+                            < keep_m =>
                 {
                     let (target, forward) = p.after(p.target, p.forward);
                     (p.x_m, p.y_m, target, forward, None)
                 }
+                // A robot in the way: step aside, away from it, where nothing else is, or walk
+                // round it, and walk on from there (the route leads back to its next point).
+                // Merely waiting would deadlock against a robot that waits for the person to
+                // pass.
                 Some(r) => {
                     let (dx, dy) = (x - p.x_m, y - p.y_m);
                     let len = dx.hypot(dy);
@@ -635,7 +637,7 @@ impl World {
                     // At least as far out as a person keeps from a robot (one that drove up
                     // closer is stepped back from), and a hair more, so that rounding never
                     // takes a step for one closer in.
-                    let d = rx.hypot(ry).max(p.radius_m + rr + 0.05) + 1e-3;
+                    let d = rx.hypot(ry).max(keep_m) + 1e-3;
                     let angle = ry.atan2(rx);
                     let round = |sense: f64| {
                         let a = angle + sense * step_m / d;
