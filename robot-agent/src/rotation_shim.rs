@@ -15,6 +15,16 @@
 //! `engage_below_mps` the shim only takes over for a path behind it (`behind_rad`); once slower,
 //! from `angular_dist_threshold_rad`. It hands back below `release_rad`.
 //!
+//! A new goal is different: there the robot is not rounding a corner of its path but starting
+//! one, and (as Nav2's shim does on every new path) the shim takes over from
+//! `angular_dist_threshold_rad` at any speed, until the robot has faced the new path once
+//! (`new_goal_turn`). The error is then measured against the path's own heading at the sampled
+//! point, not the bearing to it: a new path starts with the planner's turn in place, and the
+//! bearing to a point 0.6 m on lies half-way round that turn.
+//! DLM-Net reached task D's first goal driving south at 0.56 m/s with the next path leading
+//! east, 1.8 rad off: short of `behind_rad`, it drove a loop at its turning radius and came
+//! back past the goal, 20 s of task D's 35 s behind the dynamic window (2026-11-29).
+//!
 //! Plain data in (pose, speed, the intention's path), a command out; the
 //! [`Supervisor`](crate::Supervisor) gives the shim precedence over the driving controller, not
 //! over the dynamic window while that recovers.
@@ -48,6 +58,9 @@ pub struct RotationShimConfig {
     /// path is shorter than `forward_sampling_distance_m`: a robot that drove past the goal a
     /// little to its side turns to it on the spot instead of looping round. 0: never.
     pub goal_near_m: f64,
+    /// On a new goal's path the shim takes over from `angular_dist_threshold_rad` at any speed,
+    /// turning to the path's own heading, until the robot has faced that path once.
+    pub new_goal_turn: bool,
 }
 
 impl Default for RotationShimConfig {
@@ -61,6 +74,7 @@ impl Default for RotationShimConfig {
             release_rad: 0.35,
             rotate_to_heading_radps: 1.0,
             goal_near_m: 1.0,
+            new_goal_turn: true,
         }
     }
 }
@@ -133,6 +147,9 @@ const SLOWDOWN_RAD: f64 = 0.6;
 const GOAL_BEARING_MIN_M: f64 = 0.1;
 /// Slowest turn rate on the spot (static friction, and a turn that ends).
 const MIN_TURN_RADPS: f64 = 0.25;
+/// The path's end moving this far is a new goal (replanning towards the same goal keeps it to
+/// within a grid cell).
+const NEW_GOAL_M: f64 = 0.5;
 
 /// The shim's state: whether it is turning the robot.
 #[derive(Debug, Clone, Default)]
@@ -140,6 +157,10 @@ pub struct RotationShim {
     config: RotationShimConfig,
     turning: bool,
     turns: u32,
+    /// The end of the last path seen (the goal).
+    goal: Option<Pose2D>,
+    /// A new goal's path the robot has not yet faced.
+    fresh: bool,
 }
 
 impl RotationShim {
@@ -149,6 +170,8 @@ impl RotationShim {
             config,
             turning: false,
             turns: 0,
+            goal: None,
+            fresh: false,
         }
     }
 
@@ -164,9 +187,11 @@ impl RotationShim {
         self.turns
     }
 
-    /// Forgets a turn under way (a stop, an intervention, the recovery taking over).
+    /// Forgets a turn under way (a stop, an intervention, the recovery taking over), and that
+    /// the path is new: whoever drove since left the robot where it is.
     pub fn reset(&mut self) {
         self.turning = false;
+        self.fresh = false;
     }
 
     /// The command (v, ω) for this cycle while the robot must turn towards `path`, `None` when
@@ -180,19 +205,29 @@ impl RotationShim {
         max_turn_radps: f64,
     ) -> Option<(f64, f64)> {
         let c = self.config;
+        if let Some(&end) = path.last() {
+            if c.new_goal_turn && self.goal.is_none_or(|g| g.distance_m(&end) >= NEW_GOAL_M) {
+                self.fresh = true;
+            }
+            self.goal = Some(end);
+        }
         let near_goal = path_left_m(pose, path) < c.goal_near_m;
         let Some(error) = c
             .enabled
             .then(|| {
-                heading_error_rad(pose, path, c.forward_sampling_distance_m)
-                    .or_else(|| near_goal.then(|| goal_error_rad(pose, path)).flatten())
+                if self.fresh {
+                    path_yaw_error_rad(pose, path, c.forward_sampling_distance_m)
+                } else {
+                    heading_error_rad(pose, path, c.forward_sampling_distance_m)
+                }
+                .or_else(|| near_goal.then(|| goal_error_rad(pose, path)).flatten())
             })
             .flatten()
         else {
             self.turning = false;
             return None;
         };
-        let engage = if near_goal || v_mps.abs() < c.engage_below_mps {
+        let engage = if self.fresh || near_goal || v_mps.abs() < c.engage_below_mps {
             c.angular_dist_threshold_rad
         } else {
             c.behind_rad
@@ -211,6 +246,10 @@ impl RotationShim {
             );
         }
         self.turning = turning;
+        if !turning {
+            // Facing the new path (or turned to it): from here on corners are corners.
+            self.fresh = false;
+        }
         turning.then(|| {
             let rate = c.rotate_to_heading_radps.min(max_turn_radps);
             let w = (rate * (error.abs() / SLOWDOWN_RAD).min(1.0)).max(MIN_TURN_RADPS.min(rate));
@@ -224,14 +263,31 @@ impl RotationShim {
 /// path ends closer than that (the goal is near: see [`goal_error_rad`]).
 #[must_use]
 pub fn heading_error_rad(pose: Pose2D, path: &[Pose2D], ahead_m: f64) -> Option<f64> {
+    let target = point_ahead(pose, path, ahead_m)?;
+    let bearing = (target.y_m - pose.y_m).atan2(target.x_m - pose.x_m);
+    Some(normalize_angle(bearing - pose.yaw_rad))
+}
+
+/// The signed angle from the robot's heading to the path's own heading at the point `ahead_m`
+/// along from the robot's nearest point; `None` when the path ends closer than that. A new
+/// goal's path starts with the planner's turn in place where the robot stands: the bearing to a
+/// point 0.6 m on lies half-way round that turn (task D's first goal: 1.05 rad against the
+/// path's 1.9), the path's heading there is where the turn ends.
+#[must_use]
+pub fn path_yaw_error_rad(pose: Pose2D, path: &[Pose2D], ahead_m: f64) -> Option<f64> {
+    let target = point_ahead(pose, path, ahead_m)?;
+    Some(normalize_angle(target.yaw_rad - pose.yaw_rad))
+}
+
+/// The first path pose at least `ahead_m` from the robot, from its nearest one on; `None` for a
+/// path of fewer than two poses or one that ends closer.
+fn point_ahead(pose: Pose2D, path: &[Pose2D], ahead_m: f64) -> Option<&Pose2D> {
     if path.len() < 2 {
         return None;
     }
-    let target = path[nearest_index(pose, path)..]
+    path[nearest_index(pose, path)..]
         .iter()
-        .find(|p| p.distance_m(&pose) >= ahead_m)?;
-    let bearing = (target.y_m - pose.y_m).atan2(target.x_m - pose.x_m);
-    Some(normalize_angle(bearing - pose.yaw_rad))
+        .find(|p| p.distance_m(&pose) >= ahead_m)
 }
 
 /// The signed angle from the robot's heading to the direction of the path's end (the goal);
@@ -310,12 +366,22 @@ mod tests {
         assert!(shim.command(pose, 0.3, &path, 1.2).is_none());
     }
 
+    /// A shim that has seen `path` from its start, the robot facing along it: a path being
+    /// followed, not a new goal's.
+    fn following(path: &[Pose2D]) -> RotationShim {
+        let mut shim = RotationShim::new(RotationShimConfig::default());
+        let mut start = path[0];
+        start.yaw_rad += path_yaw_error_rad(start, path, 0.6).unwrap_or(0.0);
+        assert!(shim.command(start, 0.5, path, 1.2).is_none());
+        shim
+    }
+
     #[test]
     fn leaves_a_robot_rounding_a_corner_alone() {
-        let mut shim = RotationShim::new(RotationShimConfig::default());
         // East to (1, 0), then north: the robot at the corner still faces east.
         let mut path = east(0.0, 6);
         path.extend((1..10).map(|i| Pose2D::new(1.0, 0.2 * f64::from(i), 1.57)));
+        let mut shim = following(&path);
         let pose = Pose2D::new(0.95, 0.0, 0.0);
         let error = heading_error_rad(pose, &path, 0.6).expect("a direction");
         assert!(error > 1.2 && error < 2.0, "a corner's error: {error}");
@@ -358,10 +424,65 @@ mod tests {
         // Far from the goal a path beside the robot is a corner being rounded: left alone.
         let mut long = vec![Pose2D::new(29.61, 16.02, 0.0)];
         long.extend((1..20).map(|i| Pose2D::new(29.61 + 0.2 * f64::from(i), 16.0, 0.0)));
-        let mut fresh = RotationShim::new(RotationShimConfig::default());
-        assert!(fresh
+        assert!(following(&long)
             .command(Pose2D::new(29.61, 16.02, 1.57), 0.58, &long, 1.2)
             .is_none());
+    }
+
+    /// Task D's next path from its first goal (2026-11-29, planner's answer): a turn in place
+    /// from -1.83 to -0.9 rad where the robot stands, 0.3 m straight on, a left arc of 0.5 m
+    /// radius to east, and east; 0.1 m spacing.
+    fn turn_then_arc_east() -> Vec<Pose2D> {
+        let mut path: Vec<Pose2D> = (0..=4)
+            .map(|i| Pose2D::new(0.0, 0.0, -1.83 + 0.2325 * f64::from(i)))
+            .collect();
+        let mut p = Pose2D::new(0.0, 0.0, -0.9);
+        for k in 0..60 {
+            let turn = if (3..12).contains(&k) { 0.1 } else { 0.0 };
+            p.yaw_rad += turn;
+            p.x_m += 0.1 * p.yaw_rad.cos();
+            p.y_m += 0.1 * p.yaw_rad.sin();
+            path.push(p);
+        }
+        path
+    }
+
+    #[test]
+    fn turns_at_speed_to_a_new_goal_path_but_not_at_its_corners() {
+        // DLM-Net reached task D's first goal driving south at 0.56 m/s; the path to the next
+        // goal starts with a turn in place. The bearing to the point 0.6 m on is 1.05 rad off,
+        // short of the threshold; the path's own heading there is 1.6 rad off.
+        let path = turn_then_arc_east();
+        let mut pose = Pose2D::new(0.0, 0.0, -1.83);
+        let bearing = heading_error_rad(pose, &path, 0.6).expect("a direction");
+        assert!(bearing > 0.9 && bearing < 1.2, "{bearing}");
+        let mut shim = following(&east(-4.0, 20));
+        let (v, w) = shim
+            .command(pose, 0.56, &path, 1.2)
+            .expect("a new goal's path: turns at speed");
+        assert_eq!(v, 0.0);
+        assert!(w > 0.9, "counter-clockwise, towards east: {w}");
+        let mut cycles = 0;
+        while let Some((_, w)) = shim.command(pose, 0.0, &path, 1.2) {
+            pose.yaw_rad = normalize_angle(pose.yaw_rad + 0.1 * w);
+            cycles += 1;
+            assert!(cycles < 100, "the turn ends");
+        }
+        let error = path_yaw_error_rad(pose, &path, 0.6).expect("a direction");
+        assert!(error.abs() <= 0.35, "faces the path's heading: {error}");
+        // Once faced, the same goal's path is an ordinary one: far off it at speed (a corner)
+        // is left to the controller.
+        let corner = Pose2D::new(0.0, 0.0, -1.83);
+        assert!(shim.command(corner, 0.56, &path, 1.2).is_none());
+        // The same arrival with the old goal's path still in force: left alone too.
+        let mut same = following(&path);
+        assert!(same.command(corner, 0.56, &path, 1.2).is_none());
+        // Told not to: a new goal's path is any other.
+        let mut off = RotationShim::new(RotationShimConfig {
+            new_goal_turn: false,
+            ..RotationShimConfig::default()
+        });
+        assert!(off.command(corner, 0.56, &path, 1.2).is_none());
     }
 
     #[test]
