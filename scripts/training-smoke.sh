@@ -3,7 +3,8 @@
 # format `eval record` writes -> `python -m training.train` for each kind -> ONNX export with its
 # card -> checked against ONNX Runtime; the layer-activation figure of the shipped models; and
 # the weight average of exported models (training/average.py) on the fixtures; the card of a
-# DLM-Net driven on other DLM parameters than it was trained on (export --drive-dlm-params).
+# DLM-Net driven on other DLM parameters than it was trained on (export --drive-dlm-params); a
+# newer closed-loop record put into a shipped card (training/recard.py).
 # Installs PyTorch and the training dependencies into .venv first (scripts/setup.sh made it;
 # about 5 GB, most of it the CUDA libraries PyPI's wheel carries). Not part of the README's
 # test command: CI runs it after the Rust tests.
@@ -29,3 +30,4 @@ fi
 "$PY" training/tests/test_average.py
 "$PY" training/tests/test_init_camera.py
 "$PY" training/tests/test_export_drive.py
+"$PY" training/tests/test_recard.py

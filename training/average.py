@@ -39,7 +39,8 @@ import onnxruntime as ort
 from onnx import numpy_helper
 
 from training import card as card_mod
-from training.export import check_contract, closed_loop_summary
+from training.card import closed_loop_summary
+from training.export import check_contract
 
 MAX_MB = 20.0
 # Keys that differ between members by nature: joined or averaged instead of compared.

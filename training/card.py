@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 CARD_VERSION = "1"
 REQUIRED = (
@@ -129,3 +130,40 @@ def lpe_input_px(card: dict[str, str]) -> int:
     if "lpe_image_px" in card:
         return int(card["lpe_image_px"])
     return int(json.loads(card["lpe_rendering"])["size_px"])
+
+
+def closed_loop_summary(tables: list[str | Path], kind: str, commands: list[str] | None = None) -> str:
+    """The card's `closed_loop`: this network's rows of `eval table` results (table.json), per
+    scenario: successes/runs, interventions, collisions, time and smoothness (mean over seeds),
+    each row naming its table by its index in `tables`; with `commands`, the command that made
+    each table, in the same order."""
+    if commands is not None and len(commands) != len(tables):
+        raise SystemExit(f"--commands: {len(commands)} commands for {len(tables)} tables (one per table)")
+    rows = []
+    for i, path in enumerate(tables):
+        table = json.loads(Path(path).read_text())
+        for r in table["rows"]:
+            if r["method"] != kind:
+                continue
+            def mean(key, digits):
+                stat = r.get(key)
+                return None if stat is None else round(stat["mean"], digits)
+
+            rows.append({
+                # Which of `tables` (a card may carry the network alone and deployed, or tasks
+                # and behaviours, from separate tables with the same scenarios).
+                "table": i,
+                "scenario": r["scenario"],
+                "success": f"{r['successes']}/{r['runs']}",
+                "interventions": mean("interventions", 2),
+                "collisions": mean("collisions", 2),
+                "collisions_person_glass": r["collisions_person"] + r["collisions_glass"],
+                "time_s": mean("time_s", 1),
+                "smoothness_mps3": mean("smoothness", 3),
+            })
+    if not rows:
+        raise SystemExit(f"--closed-loop: no rows for method {kind} in {', '.join(map(str, tables))}")
+    summary = {"tables": [str(t) for t in tables], "rows": rows}
+    if commands is not None:
+        summary["commands"] = list(commands)
+    return json.dumps(summary, separators=(",", ":"))

@@ -35,6 +35,7 @@ import torch
 
 from training import card as card_mod
 from training import data, model
+from training.card import closed_loop_summary
 
 OPSET = 17
 MAX_MB = 20.0
@@ -132,37 +133,6 @@ def check_contract(sess: ort.InferenceSession, card: dict[str, str]) -> None:
         )
         if not ok or isinstance(dims[0], int):
             raise SystemExit(f"export: `{name}` has shape {dims}, expected {expected} with a dynamic batch")
-
-
-def closed_loop_summary(tables: list[str | Path], kind: str) -> str:
-    """The card's `closed_loop`: this network's rows of `eval table` results (table.json), per
-    scenario: successes/runs, interventions, collisions, time and smoothness (mean over seeds),
-    each row naming its table by its index in `tables`."""
-    rows = []
-    for i, path in enumerate(tables):
-        table = json.loads(Path(path).read_text())
-        for r in table["rows"]:
-            if r["method"] != kind:
-                continue
-            def mean(key, digits):
-                stat = r.get(key)
-                return None if stat is None else round(stat["mean"], digits)
-
-            rows.append({
-                # Which of `tables` (a card may carry the network alone and deployed, or tasks
-                # and behaviours, from separate tables with the same scenarios).
-                "table": i,
-                "scenario": r["scenario"],
-                "success": f"{r['successes']}/{r['runs']}",
-                "interventions": mean("interventions", 2),
-                "collisions": mean("collisions", 2),
-                "collisions_person_glass": r["collisions_person"] + r["collisions_glass"],
-                "time_s": mean("time_s", 1),
-                "smoothness_mps3": mean("smoothness", 3),
-            })
-    if not rows:
-        raise SystemExit(f"--closed-loop: no rows for method {kind} in {', '.join(map(str, tables))}")
-    return json.dumps({"tables": [str(t) for t in tables], "rows": rows}, separators=(",", ":"))
 
 
 def drive_dlm_with(card: dict[str, str], changes: dict) -> None:
