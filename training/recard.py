@@ -11,7 +11,8 @@ the machine that trained; this rewrites only the ONNX metadata_props key `closed
 same key in the card JSON beside the model.
 
 Checked, failing loudly, before anything is written: the model's card and the JSON agree on
-every key but `closed_loop` (the JSON also carries the export check's `onnx_*` keys); the new
+every key but `closed_loop` (the JSON also carries the export check's `onnx_*` keys, of which
+`onnx_mb`, the file's size, follows the longer or shorter card); the new
 card passes the agent's rules (card.py); the rewritten graph is byte for byte the old one
 (initializers, nodes, inputs, outputs); onnxruntime reads back the new card. Both files are
 written atomically (a temporary file renamed over the old one), the model first.
@@ -79,6 +80,9 @@ def recard(model: Path, card_json: Path | None, tables: list[str | Path],
     write_atomically(model, blob)
     if card_json is not None and recorded is not None:
         recorded["closed_loop"] = new["closed_loop"]
+        if "onnx_mb" in recorded:
+            # The export's record of the file's size: the longer card makes the file longer.
+            recorded["onnx_mb"] = f"{len(blob) / 1e6:.3f}"
         write_atomically(card_json, (json.dumps(recorded, indent=1, sort_keys=True) + "\n").encode())
     rows = json.loads(new["closed_loop"])["rows"]
     print(f"recard: {model}: closed_loop now {len(rows)} rows from {len(tables)} tables"

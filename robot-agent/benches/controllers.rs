@@ -2,7 +2,9 @@
 //! ray-cast scan with an unmapped box on the path), against references in the same run: the
 //! same controller without the local navigation function (plain Fox), with a denser window
 //! (21 x 41 samples), and the pure-pursuit path tracker; and the default window with the goal in
-//! straight sight (it heads for the goal, checking the line to it on the scan). Then the collision monitor's check of
+//! straight sight (it heads for the goal, checking the line to it on the scan), and standing
+//! inside its inflation beside the box with the path round it (the navigation function starts
+//! from the way out). Then the collision monitor's check of
 //! one command on the same scan (what the agent adds after any controller), against the path
 //! tracker's step.
 //!
@@ -64,8 +66,50 @@ fn bench_step(c: &mut Criterion) {
         intention: Some(&near_goal),
         ..input
     };
+    // Standing beside the box's south face, 0.31 m from it (inside the window's 0.35 m
+    // inflation), the path round its east end and back west along its north face: the look-ahead
+    // point lies beyond the box, and the navigation function starts from the way out of the
+    // inflation.
+    let beside = Pose2D::new(7.0, 6.89, 0.0);
+    let beside_scan = amcl_world::Laser::default().scan(&truth, &beside, 0, &mut rng);
+    let nearest_m = beside_scan
+        .ranges_m
+        .iter()
+        .copied()
+        .filter(|r| r.is_finite())
+        .fold(f32::INFINITY, f32::min);
+    assert!(nearest_m < 0.35, "not inside the inflation: {nearest_m} m");
+    let corners = [
+        (7.0, 6.89),
+        (7.5, 7.1),
+        (7.65, 7.5),
+        (7.5, 7.95),
+        (7.0, 8.1),
+        (4.0, 8.1),
+    ];
+    let mut round: Vec<Pose2D> = Vec::new();
+    for w in corners.windows(2) {
+        let ((x0, y0), (x1, y1)): ((f64, f64), (f64, f64)) = (w[0], w[1]);
+        let yaw = (y1 - y0).atan2(x1 - x0);
+        for k in 0..10 {
+            let f = f64::from(k) / 10.0;
+            round.push(Pose2D::new(x0 + f * (x1 - x0), y0 + f * (y1 - y0), yaw));
+        }
+    }
+    round.push(Pose2D::new(4.0, 8.1, std::f64::consts::PI));
+    let round_the_end = Intention {
+        map: fixtures::map_ref("depot"),
+        ..fixtures::intention(round, Dlm::GoForward)
+    };
+    let beside_input = ControlInput {
+        pose: beside,
+        v_mps: 0.0,
+        scan: Some(&beside_scan),
+        intention: Some(&round_the_end),
+        ..input
+    };
     let default = DynamicWindowConfig::default();
-    let cases: [(&str, Box<dyn Controller>); 5] = [
+    let cases: [(&str, Box<dyn Controller>); 6] = [
         (
             "dwa_default_11x21",
             Box::new(DynamicWindow::new(default).expect("config")),
@@ -99,12 +143,18 @@ fn bench_step(c: &mut Criterion) {
             "dwa_default_goal_in_sight",
             Box::new(DynamicWindow::new(default).expect("config")),
         ),
+        (
+            "dwa_default_inside_the_inflation",
+            Box::new(DynamicWindow::new(default).expect("config")),
+        ),
     ];
     let mut group = c.benchmark_group("control_step");
     group.sample_size(30);
     for (name, mut controller) in cases {
         let step_input = if name.ends_with("goal_in_sight") {
             &goal_input
+        } else if name.ends_with("inside_the_inflation") {
+            &beside_input
         } else {
             &input
         };

@@ -32,6 +32,8 @@ struct Cycle {
     decision: Decision,
     status: AgentStatus,
     truth: Pose2D,
+    /// Contacts in this cycle's step.
+    collisions: usize,
 }
 
 /// A world with one robot at `start` and the agent's supervisor (path tracker) driving it along
@@ -133,6 +135,7 @@ impl Run {
             decision,
             status,
             truth: o.ground_truth_pose,
+            collisions: o.collisions.len(),
         }
     }
 }
@@ -294,5 +297,54 @@ fn a_robot_held_short_of_a_narrow_passage_reports_giving_way() {
         "went on west after the wait: from {:?} to {:?}",
         released.truth,
         end.truth
+    );
+}
+
+/// Task E's maze, the east side of the thin wall that ends at (21.4, 16.2): DLM-Net, told
+/// `turn_left` too early on its way round the end, stood here facing it with 0.31 m from its
+/// centre to the wall (2026-11-29, seed 0), and the dynamic window that relieved it crept on
+/// the spot until the person watching carried the robot on. The window's navigation function
+/// had no answer inside its own inflation, and the look-ahead point round the end counted as in
+/// sight through it. Now the window finds the way out of the inflation and round the end:
+/// north along the wall first, then west and down the corridor beyond, without contact.
+#[test]
+fn a_relieving_window_beside_a_thin_walls_end_drives_round_it() {
+    // The planner's path at that moment (run log), from the robot round the end and south.
+    const PATH: [(f64, f64, f64); 20] = [
+        (21.75, 16.08, 2.52),
+        (21.42, 16.52, 2.53),
+        (21.27, 16.60, 2.75),
+        (21.11, 16.65, 2.96),
+        (20.86, 16.67, -3.10),
+        (20.60, 16.63, -2.86),
+        (20.40, 16.55, -2.62),
+        (20.24, 16.43, -2.41),
+        (20.12, 16.29, -2.18),
+        (20.02, 16.10, -1.93),
+        (19.97, 15.90, -1.69),
+        (19.97, 15.71, -1.45),
+        (20.03, 15.49, -1.22),
+        (20.11, 15.29, -1.13),
+        (20.21, 15.10, -1.10),
+        (20.31, 14.90, -1.10),
+        (20.40, 14.71, -1.16),
+        (20.48, 14.52, -1.18),
+        (20.54, 14.32, -1.50),
+        (20.55, 14.07, -1.50),
+    ];
+    let start = Pose2D::new(21.75, 16.09, 2.46);
+    let path: Vec<Pose2D> = PATH.iter().map(|&(x, y, t)| Pose2D::new(x, y, t)).collect();
+    let mut run = Run::new("task_e", start, Vec::new(), path);
+    let cycles: Vec<Cycle> = (0..150).map(|_| run.cycle()).collect();
+    assert!(
+        cycles.iter().any(|c| c.decision.recovering),
+        "the monitor never held the path tracker at the wall's end"
+    );
+    let contacts: usize = cycles.iter().map(|c| c.collisions).sum();
+    assert_eq!(contacts, 0, "no contact");
+    let end = &cycles[cycles.len() - 1].truth;
+    assert!(
+        end.x_m < 20.8 && end.y_m < 15.5,
+        "round the wall's end and down the corridor beyond within 15 s: {end:?}"
     );
 }

@@ -98,8 +98,9 @@ def main() -> int:
         assert meta["closed_loop"] == new["closed_loop"]
         recorded = json.loads(card_json.read_text())
         assert recorded["closed_loop"] == new["closed_loop"]
-        assert {k: v for k, v in recorded.items() if k != "closed_loop"} == {
-            k: v for k, v in old_json.items() if k != "closed_loop"}
+        assert recorded["onnx_mb"] == f"{model.stat().st_size / 1e6:.3f}", recorded["onnx_mb"]
+        assert {k: v for k, v in recorded.items() if k not in ("closed_loop", "onnx_mb")} == {
+            k: v for k, v in old_json.items() if k not in ("closed_loop", "onnx_mb")}
         assert not list(tmp.glob("*.tmp")), "temporary files left behind"
     print("recard: ok")
     return 0

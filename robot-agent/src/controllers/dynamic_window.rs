@@ -19,7 +19,10 @@
 //! planner's path runs through it) hides the look-ahead point, and heading straight for it traps
 //! plain Fox in front of the obstacle. A small navigation function on the scan around the robot
 //! (after Brock & Khatib's global dynamic window, 1999) then supplies a detour point to head
-//! for, with hysteresis so that the robot keeps to the side it chose.
+//! for, with hysteresis so that the robot keeps to the side it chose. The same holds for a robot
+//! standing inside the inflation beside a wall's end with its path round the end: the function
+//! starts from the way out of the inflation, and the look-ahead point counts as hidden when the
+//! line to it stays inside the inflation beyond the robot's own depth in it.
 //!
 //! A second: with the goal in straight sight within the look-ahead distance, the robot heads for
 //! the goal itself, no faster than lets it turn into it, and clearance counts only as far as the
@@ -296,13 +299,17 @@ struct NavGrid {
     blocked: Vec<bool>,
     value: Vec<f64>,
     heap: std::collections::BinaryHeap<MinCost<f64, usize>>,
+    /// How far from the robot blocked cells are its own way out of the inflation it stands in
+    /// (how deep it stands, plus a cell's diagonal), not an obstacle in the way.
+    leave_m: f64,
 }
 
 impl NavGrid {
-    fn reset(&mut self, half_m: f64, res_m: f64) {
+    fn reset(&mut self, half_m: f64, res_m: f64, depth_m: f64) {
         self.n = (2.0 * half_m / res_m).ceil() as usize;
         self.res_m = res_m;
         self.half_m = half_m;
+        self.leave_m = depth_m.max(0.0) + res_m * std::f64::consts::SQRT_2;
         self.blocked.clear();
         self.blocked.resize(self.n * self.n, false);
         self.value.clear();
@@ -421,8 +428,11 @@ impl NavGrid {
     }
 
     /// Whether the straight line from the robot to (x, y) crosses no blocked cell. Blocked cells
-    /// at the start of the line are skipped: the robot may stand in the inflation of a close
-    /// point and must still see the way out.
+    /// at the start of the line, within `leave_m`, are skipped: the robot may stand in the
+    /// inflation of a close point and must still see the way out. Not further: a line that
+    /// leaves the robot along the obstacle, inside its inflation all the way, does not see past
+    /// it (task E, 2026-11-29: the robot beside a thin wall's end saw the path round the end
+    /// through it, and the window turned it into the end instead of round it).
     fn visible(&self, (x, y): (f64, f64)) -> bool {
         let len = x.hypot(y);
         let steps = (2.0 * len / self.res_m).ceil() as usize;
@@ -436,20 +446,54 @@ impl NavGrid {
             let blocked = self.cell(f * x, f * y).is_some_and(|i| self.blocked[i]);
             if !blocked {
                 leaving = false;
-            } else if !leaving {
+            } else if !leaving || f * len > self.leave_m {
                 return false;
             }
         }
         true
     }
 
-    /// Along the steepest descent from the robot (up to `distance_m` of travel), the farthest
-    /// point still in straight sight of the robot.
+    /// Where the function's descent starts: the robot's cell where that has a value; where the
+    /// robot stands inside the inflation of a close point (its cell blocked), the free cell
+    /// within `leave_m` whose value plus the distance to it is least, the way out of the
+    /// inflation. `None` where neither has a value.
+    fn way_out(&self) -> Option<usize> {
+        let escape_m = self.leave_m;
+        let robot = self.cell(0.0, 0.0)?;
+        if !self.blocked[robot] {
+            return self.value[robot].is_finite().then_some(robot);
+        }
+        let k = (escape_m / self.res_m).ceil() as i64;
+        let (cx, cy) = ((robot % self.n) as i64, (robot / self.n) as i64);
+        let n = self.n as i64;
+        let mut best: Option<(f64, usize)> = None;
+        for dy in -k..=k {
+            for dx in -k..=k {
+                let (x, y) = (cx + dx, cy + dy);
+                if x < 0 || y < 0 || x >= n || y >= n {
+                    continue;
+                }
+                let j = (y * n + x) as usize;
+                let d_m = (dx as f64).hypot(dy as f64) * self.res_m;
+                if self.blocked[j] || !self.value[j].is_finite() || d_m > escape_m {
+                    continue;
+                }
+                let cost = self.value[j] + d_m;
+                if best.is_none_or(|(b, _)| cost < b) {
+                    best = Some((cost, j));
+                }
+            }
+        }
+        best.map(|(_, j)| j)
+    }
+
+    /// Along the steepest descent from the robot (up to `distance_m` of travel; from inside the
+    /// inflation, from its way out), the farthest point still in straight sight of the robot.
     fn visible_carrot(&self, distance_m: f64) -> Option<(f64, f64)> {
-        let mut i = self.cell(0.0, 0.0)?;
+        let mut i = self.way_out()?;
         let n = self.n as i64;
         let mut travelled = 0.0;
-        let mut best = None;
+        let mut best = Some(self.centre(i)).filter(|&p| self.visible(p));
         while travelled < distance_m {
             let (cx, cy) = ((i % self.n) as i64, (i / self.n) as i64);
             let mut next = i;
@@ -548,13 +592,16 @@ impl Controller for DynamicWindow {
         // an obstacle lying on the path. A navigation function on the scan around the robot
         // (Brock & Khatib's global dynamic window) knows the way around: when the look-ahead point
         // is out of sight behind an obstacle, the robot heads for the farthest point of the
-        // function's descent that it can see. Elsewhere (and where the function has no answer,
-        // e.g. the robot inside the inflation) plain Fox remains: the function's 8-connected
-        // gradient is too coarse to steer by directly. Heading for the goal in sight needs none.
+        // function's descent that it can see. A robot standing inside the inflation of a close
+        // point (a controller it relieves left it there) starts the descent from the way out of
+        // it: plain Fox would aim it at the look-ahead point beyond the obstacle, where every
+        // arc comes closer. Elsewhere (and where the function has no answer) plain Fox remains:
+        // the function's 8-connected gradient is too coarse to steer by directly. Heading for
+        // the goal in sight needs none.
         let use_nav = !goal_in_sight && c.local_grid_resolution_m > 0.0 && {
             let half_m = c.lookahead_m + c.clearance_cap_m.min(1.0);
             let res = c.local_grid_resolution_m;
-            self.nav.reset(half_m, res);
+            self.nav.reset(half_m, res, inflated_m - start_sq.sqrt());
             for p in &self.points {
                 self.nav.block_disc(p[0], p[1], inflated_m);
             }
@@ -581,7 +628,7 @@ impl Controller for DynamicWindow {
                 self.nav.seed(p.0, p.1, v);
             }
             self.nav.propagate();
-            self.nav.value(0.0, 0.0).is_finite()
+            self.nav.way_out().is_some()
         };
         let blocked_ahead = use_nav && !self.nav.visible(lookahead);
         let (target, target_is_goal) = if goal_in_sight {
@@ -778,35 +825,36 @@ mod tests {
             .collect()
     }
 
-    /// A 360-degree scan of a wall across the robot's way at `wall_x_m` (robot frame, robot at
-    /// the origin facing +x), or of nothing.
-    fn scan_with_wall(wall_x_m: Option<f64>) -> LaserScan {
-        let n = 360;
-        let inc = std::f64::consts::TAU / f64::from(n);
-        let ranges_m = (0..n)
-            .map(|i| {
-                let a = -std::f64::consts::PI + inc * f64::from(i);
-                match wall_x_m {
-                    Some(x) if a.cos() > 1e-6 => {
-                        let r = x / a.cos();
-                        if r < 10.0 {
-                            r as f32
-                        } else {
-                            10.0
-                        }
-                    }
-                    _ => 10.0,
-                }
-            })
-            .collect();
+    /// A 360-degree scan of `beams` beams from the robot (at the origin facing +x), each beam's
+    /// range given by its angle.
+    fn full_scan(beams: u32, range_at: impl Fn(f64) -> f32) -> LaserScan {
+        let inc = std::f64::consts::TAU / f64::from(beams);
         LaserScan {
             header: Header::default(),
             angle_min_rad: -std::f32::consts::PI,
             angle_increment_rad: inc as f32,
             range_min_m: 0.05,
             range_max_m: 10.0,
-            ranges_m,
+            ranges_m: (0..beams)
+                .map(|i| range_at(-std::f64::consts::PI + inc * f64::from(i)))
+                .collect(),
         }
+    }
+
+    /// A 360-degree scan of a wall across the robot's way at `wall_x_m` (robot frame, robot at
+    /// the origin facing +x), or of nothing.
+    fn scan_with_wall(wall_x_m: Option<f64>) -> LaserScan {
+        full_scan(360, |a| match wall_x_m {
+            Some(x) if a.cos() > 1e-6 => {
+                let r = x / a.cos();
+                if r < 10.0 {
+                    r as f32
+                } else {
+                    10.0
+                }
+            }
+            _ => 10.0,
+        })
     }
 
     fn input<'a>(
@@ -954,6 +1002,63 @@ mod tests {
             .control(&input(0.1, 0.0, Some(&scan), &it, &limits, 0.0))
             .unwrap_err();
         assert!(err.to_string().contains("dt_s"), "{err}");
+    }
+
+    /// A 360-degree scan (robot at the origin facing +x) of a wall 0.6 m thick whose end is
+    /// beside the robot: it fills x ≤ 0, 0.31 ≤ y ≤ 0.91, so the robot stands 0.31 m from its
+    /// face, inside the window's 0.35 m inflation.
+    fn scan_beside_a_walls_end() -> LaserScan {
+        let inside = |x: f64, y: f64| (-3.0..=0.0).contains(&x) && (0.31..=0.91).contains(&y);
+        full_scan(720, |a| {
+            let mut r: f64 = 0.0;
+            while r < 10.0 && !inside(r * a.cos(), r * a.sin()) {
+                r += 0.005;
+            }
+            r.min(10.0) as f32
+        })
+    }
+
+    #[test]
+    fn finds_the_way_round_a_walls_end_from_inside_its_inflation() {
+        let limits = Limits::default();
+        let mut dwa = DynamicWindow::new(DynamicWindowConfig::default()).unwrap();
+        // The planner's path round the end, 0.27-0.3 m from it (its radius is the robot's,
+        // not the window's inflation), then on along the wall's far side.
+        let corners: [(f64, f64); 7] = [
+            (0.0, 0.0),
+            (0.2, 0.3),
+            (0.3, 0.6),
+            (0.2, 1.0),
+            (0.0, 1.2),
+            (-0.5, 1.25),
+            (-2.5, 1.25),
+        ];
+        let mut path = Vec::new();
+        for w in corners.windows(2) {
+            let ((x0, y0), (x1, y1)) = (w[0], w[1]);
+            let yaw = (y1 - y0).atan2(x1 - x0);
+            let steps = ((x1 - x0).hypot(y1 - y0) / 0.05).ceil() as i32;
+            for k in 0..steps {
+                let f = f64::from(k) / f64::from(steps);
+                path.push(Pose2D::new(x0 + f * (x1 - x0), y0 + f * (y1 - y0), yaw));
+            }
+        }
+        path.push(Pose2D::new(-2.5, 1.25, std::f64::consts::PI));
+        let it = intention(path);
+        let scan = scan_beside_a_walls_end();
+        dwa.control(&input(0.0, 0.0, Some(&scan), &it, &limits, 0.1))
+            .unwrap();
+        // The look-ahead point, 1.5 m on, lies beyond the wall: the line to it runs inside the
+        // inflation all the way from the robot, which is no way out of it. The window heads for
+        // a point of the navigation function's descent instead, round the end: ahead of the
+        // robot, not to its left through the wall.
+        assert!(dwa.carrot.is_some(), "no detour from inside the inflation");
+        let target = dwa.last_choice().unwrap().target_m;
+        assert!(target.0 > 0.2, "target {target:?} is not round the end");
+        assert!(
+            target.1.atan2(target.0) < 0.8,
+            "target {target:?} is through the wall"
+        );
     }
 
     #[test]
