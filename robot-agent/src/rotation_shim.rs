@@ -352,18 +352,24 @@ mod tests {
         let (v, w) = shim.command(pose, 0.4, &path, 1.2).expect("turns");
         assert_eq!(v, 0.0);
         assert!(w.abs() > 0.9, "full turn rate far off the heading: {w}");
-        let mut cycles = 0;
-        while let Some((_, w)) = shim.command(pose, 0.0, &path, 1.2) {
-            pose.yaw_rad = normalize_angle(pose.yaw_rad + 0.1 * w);
-            cycles += 1;
-            assert!(cycles < 100, "the turn ends");
-        }
+        turn_until_handed_back(&mut shim, &mut pose, &path);
         let error = heading_error_rad(pose, &path, 0.6).expect("a direction");
         assert!(error.abs() <= 0.35, "hands back facing the path: {error}");
         assert!(!shim.turning());
         assert_eq!(shim.turns(), 1);
         // Facing it, the controller drives; the shim stays out of the way.
         assert!(shim.command(pose, 0.3, &path, 1.2).is_none());
+    }
+
+    /// The robot standing at `pose` turns on the spot at the shim's rate, 0.1 s a cycle, until
+    /// the shim hands back (within 100 cycles).
+    fn turn_until_handed_back(shim: &mut RotationShim, pose: &mut Pose2D, path: &[Pose2D]) {
+        let mut cycles = 0;
+        while let Some((_, w)) = shim.command(*pose, 0.0, path, 1.2) {
+            pose.yaw_rad = normalize_angle(pose.yaw_rad + 0.1 * w);
+            cycles += 1;
+            assert!(cycles < 100, "the turn ends");
+        }
     }
 
     /// A shim that has seen `path` from its start, the robot facing along it: a path being
@@ -406,12 +412,7 @@ mod tests {
             .expect("turns at speed");
         assert_eq!(v, 0.0);
         assert!(w < -0.9, "clockwise, towards the goal: {w}");
-        let mut cycles = 0;
-        while let Some((_, w)) = shim.command(pose, 0.0, &path, 1.2) {
-            pose.yaw_rad = normalize_angle(pose.yaw_rad + 0.1 * w);
-            cycles += 1;
-            assert!(cycles < 100, "the turn ends");
-        }
+        turn_until_handed_back(&mut shim, &mut pose, &path);
         assert!(
             pose.yaw_rad.abs() <= 0.35,
             "faces the goal: {}",
@@ -462,12 +463,7 @@ mod tests {
             .expect("a new goal's path: turns at speed");
         assert_eq!(v, 0.0);
         assert!(w > 0.9, "counter-clockwise, towards east: {w}");
-        let mut cycles = 0;
-        while let Some((_, w)) = shim.command(pose, 0.0, &path, 1.2) {
-            pose.yaw_rad = normalize_angle(pose.yaw_rad + 0.1 * w);
-            cycles += 1;
-            assert!(cycles < 100, "the turn ends");
-        }
+        turn_until_handed_back(&mut shim, &mut pose, &path);
         let error = path_yaw_error_rad(pose, &path, 0.6).expect("a direction");
         assert!(error.abs() <= 0.35, "faces the path's heading: {error}");
         // Once faced, the same goal's path is an ordinary one: far off it at speed (a corner)
