@@ -14,6 +14,11 @@
 //! that point for a moment without anything being wrong, so while the robot drives faster than
 //! `engage_below_mps` the shim only takes over for a path behind it (`behind_rad`); once slower,
 //! from `angular_dist_threshold_rad`. It hands back below `release_rad`.
+//! That threshold is Nav2's default, 0.8 rad (0.785 there). From 1.2 rad (2026-11-27 to
+//! 2026-11-29), DLM-Net crept towards the corridor's wall outside task D's first room for 3-4 s,
+//! told `turn_right` and facing 0.9 rad off its path, until the recovery relieved it; at 0.8 the
+//! shim turns it, and task D took 233 s instead of 242 (the dynamic window's 214: +9 % instead
+//! of +13 %; docs/evaluation.md, round 26).
 //!
 //! A new goal is different: there the robot is not rounding a corner of its path but starting
 //! one, and (as Nav2's shim does on every new path) the shim takes over from
@@ -69,7 +74,7 @@ impl Default for RotationShimConfig {
             enabled: true,
             forward_sampling_distance_m: 0.6,
             engage_below_mps: 0.15,
-            angular_dist_threshold_rad: 1.2,
+            angular_dist_threshold_rad: 0.8,
             behind_rad: 2.0,
             release_rad: 0.35,
             rotate_to_heading_radps: 1.0,
@@ -397,6 +402,55 @@ mod tests {
         );
         // Standing there that far off, it turns.
         assert!(shim.command(pose, 0.0, &path, 1.2).is_some());
+    }
+
+    /// Task D's path out of its first room's door and south down the corridor (2026-11-29,
+    /// seed 0, the planner's answer at 49.6 s): the robot stood at (8.54, 19.44) with the
+    /// corridor's east wall 0.5 m ahead.
+    fn out_of_task_ds_door() -> Vec<Pose2D> {
+        [
+            (8.54, 19.44, -0.71),
+            (8.55, 18.93, -1.78),
+            (8.50, 18.73, -1.87),
+            (8.43, 18.53, -1.93),
+            (8.35, 18.33, -1.95),
+            (8.27, 18.12, -1.93),
+            (8.21, 17.92, -1.85),
+            (8.16, 17.72, -1.77),
+            (8.13, 17.52, -1.68),
+            (8.11, 17.32, -1.62),
+            (8.10, 17.07, -1.59),
+            (8.10, 16.82, -1.56),
+        ]
+        .iter()
+        .map(|&(x, y, yaw)| Pose2D::new(x, y, yaw))
+        .collect()
+    }
+
+    #[test]
+    fn turns_a_robot_creeping_at_a_wall_from_nav2s_threshold() {
+        // DLM-Net, told turn_right, crept at 0.03 m/s towards the wall for 3-4 s, facing
+        // 0.94 rad off its path, until the recovery's cornered trigger relieved it.
+        let path = out_of_task_ds_door();
+        let mut pose = Pose2D::new(8.54, 19.44, -0.69);
+        let error = heading_error_rad(pose, &path, 0.6).expect("a direction");
+        assert!(error < -0.8 && error > -1.2, "{error}");
+        let mut shim = following(&path);
+        let (v, w) = shim.command(pose, 0.03, &path, 1.2).expect("turns");
+        assert_eq!(v, 0.0);
+        assert!(w < -0.9, "clockwise, towards the corridor: {w}");
+        turn_until_handed_back(&mut shim, &mut pose, &path);
+        let error = heading_error_rad(pose, &path, 0.6).expect("a direction");
+        assert!(error.abs() <= 0.35, "faces down the corridor: {error}");
+        // Driving at speed that far off is rounding the corner: left to the controller.
+        let corner = Pose2D::new(8.54, 19.44, -0.69);
+        assert!(following(&path).command(corner, 0.5, &path, 1.2).is_none());
+        // From round 24's 1.2 rad, the creep went on.
+        let mut old = RotationShim::new(RotationShimConfig {
+            angular_dist_threshold_rad: 1.2,
+            ..RotationShimConfig::default()
+        });
+        assert!(old.command(corner, 0.03, &path, 1.2).is_none());
     }
 
     #[test]
