@@ -380,7 +380,11 @@ mod tests {
     /// A shim that has seen `path` from its start, the robot facing along it: a path being
     /// followed, not a new goal's.
     fn following(path: &[Pose2D]) -> RotationShim {
-        let mut shim = RotationShim::new(RotationShimConfig::default());
+        following_with(RotationShimConfig::default(), path)
+    }
+
+    fn following_with(config: RotationShimConfig, path: &[Pose2D]) -> RotationShim {
+        let mut shim = RotationShim::new(config);
         let mut start = path[0];
         start.yaw_rad += path_yaw_error_rad(start, path, 0.6).unwrap_or(0.0);
         assert!(shim.command(start, 0.5, path, 1.2).is_none());
@@ -446,10 +450,13 @@ mod tests {
         let corner = Pose2D::new(8.54, 19.44, -0.69);
         assert!(following(&path).command(corner, 0.5, &path, 1.2).is_none());
         // From round 24's 1.2 rad, the creep went on.
-        let mut old = RotationShim::new(RotationShimConfig {
-            angular_dist_threshold_rad: 1.2,
-            ..RotationShimConfig::default()
-        });
+        let mut old = following_with(
+            RotationShimConfig {
+                angular_dist_threshold_rad: 1.2,
+                ..RotationShimConfig::default()
+            },
+            &path,
+        );
         assert!(old.command(corner, 0.03, &path, 1.2).is_none());
     }
 
