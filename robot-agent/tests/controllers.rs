@@ -163,25 +163,7 @@ fn no_events(_: f64, _: &Pose2D, _: &mut OccupancyGrid) -> bool {
 
 /// A straight path with poses every 0.1 m.
 fn straight(from: (f64, f64), to: (f64, f64)) -> Vec<Pose2D> {
-    polyline(&[from, to])
-}
-
-fn polyline(points: &[(f64, f64)]) -> Vec<Pose2D> {
-    let mut out = Vec::new();
-    for w in points.windows(2) {
-        let ((ax, ay), (bx, by)) = (w[0], w[1]);
-        let len = (bx - ax).hypot(by - ay);
-        let yaw = (by - ay).atan2(bx - ax);
-        let n = (len / 0.1).ceil().max(1.0) as usize;
-        for i in 0..n {
-            let f = i as f64 / n as f64;
-            out.push(Pose2D::new(ax + f * (bx - ax), ay + f * (by - ay), yaw));
-        }
-    }
-    let (lx, ly) = *points.last().unwrap();
-    let yaw = out.last().map_or(0.0, |p| p.yaw_rad);
-    out.push(Pose2D::new(lx, ly, yaw));
-    out
+    fixtures::polyline(&[from, to], 0.1)
 }
 
 /// A shortest 8-connected grid path on the floor plan inflated by `inflate_m`, shortened by
@@ -252,7 +234,7 @@ fn grid_path(map: &OccupancyGrid, from: (f64, f64), to: (f64, f64), inflate_m: f
         .collect();
     points[0] = from;
     *points.last_mut().unwrap() = to;
-    polyline(&points)
+    fixtures::polyline(&points, 0.1)
 }
 
 fn dwa() -> DynamicWindow {

@@ -51,6 +51,27 @@ pub fn straight_path(x0: f64, y0: f64, yaw_rad: f64, len_m: f64, step_m: f64) ->
         .collect()
 }
 
+/// A path through `points` in straight pieces, a pose every `step_m` at most along each (its
+/// yaw the piece's direction) and one on the last point, facing along the last piece.
+#[must_use]
+pub fn polyline(points: &[(f64, f64)], step_m: f64) -> Vec<Pose2D> {
+    let mut out = Vec::new();
+    for w in points.windows(2) {
+        let ((ax, ay), (bx, by)) = (w[0], w[1]);
+        let yaw = (by - ay).atan2(bx - ax);
+        let n = ((bx - ax).hypot(by - ay) / step_m).ceil().max(1.0) as usize;
+        for i in 0..n {
+            let f = i as f64 / n as f64;
+            out.push(Pose2D::new(ax + f * (bx - ax), ay + f * (by - ay), yaw));
+        }
+    }
+    if let Some(&(x, y)) = points.last() {
+        let yaw = out.last().map_or(0.0, |p| p.yaw_rad);
+        out.push(Pose2D::new(x, y, yaw));
+    }
+    out
+}
+
 /// A path from the origin (heading +x) that swings out to the left, `reach_m` at most, and comes
 /// back to a goal 1 m straight ahead: the shape of a planner's loop round a goal too close to
 /// turn into.

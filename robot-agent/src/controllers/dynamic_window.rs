@@ -1033,18 +1033,7 @@ mod tests {
             (-0.5, 1.25),
             (-2.5, 1.25),
         ];
-        let mut path = Vec::new();
-        for w in corners.windows(2) {
-            let ((x0, y0), (x1, y1)) = (w[0], w[1]);
-            let yaw = (y1 - y0).atan2(x1 - x0);
-            let steps = ((x1 - x0).hypot(y1 - y0) / 0.05).ceil() as i32;
-            for k in 0..steps {
-                let f = f64::from(k) / f64::from(steps);
-                path.push(Pose2D::new(x0 + f * (x1 - x0), y0 + f * (y1 - y0), yaw));
-            }
-        }
-        path.push(Pose2D::new(-2.5, 1.25, std::f64::consts::PI));
-        let it = intention(path);
+        let it = intention(test_support::fixtures::polyline(&corners, 0.05));
         let scan = scan_beside_a_walls_end();
         dwa.control(&input(0.0, 0.0, Some(&scan), &it, &limits, 0.1))
             .unwrap();
