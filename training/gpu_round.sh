@@ -20,7 +20,7 @@
 # it exists), LR (1e-3; later rounds, warm-started, use LR_LATER, 3e-4), GEN_FIRST (1000: round
 # r records on buildings GEN_FIRST + (r-1) GEN.., the expert 2000 higher: never the same twice),
 # ENCOUNTER_KINDS (the scripted encounters' kinds, comma-separated, e.g. furniture,glass_door;
-# default all six), KEEP_EPOCHS (1: every epoch's checkpoint comes back too, in
+# default the six of `eval record`; person_head_on only when named), KEEP_EPOCHS (1: every epoch's checkpoint comes back too, in
 # r<round>-<kind>-<backbone>-epochs<k>.tar of at most 15 MB each, at most EPOCH_MB (45) MB in
 # all, thinned evenly, the last epoch always kept: candidates to judge in closed loop).
 # The small CPU check runs it with tiny budgets (see training/README.md).

@@ -249,7 +249,8 @@ pub struct TableArgs {
     #[arg(long)]
     no_seen_obstacles: bool,
     /// Puts this scripted encounter (`person_ahead`, `person_oncoming`, `glass_door`,
-    /// `robot_parked`, `furniture`, `open_glass_door`; as `eval record --encounters` draws them) on the path from
+    /// `robot_parked`, `furniture`, `open_glass_door`, `person_head_on`; as `eval record
+    /// --encounters` draws them) on the path from
     /// each scenario's start to its first goal, named `<scenario>-<kind>`; scenarios where it
     /// does not fit are left out. With `--generated N`: the situation on N buildings.
     #[arg(long)]
@@ -306,7 +307,8 @@ pub struct RecordArgs {
     /// robot, furniture in the way, an open glass door off the drawn path ...
     #[arg(long, default_value_t = 0.0)]
     encounters: f64,
-    /// ... of these kinds (comma-separated; default all six), tried in a random order, the
+    /// ... of these kinds (comma-separated; default the six above: `person_head_on`, a person
+    /// coming along the robot's own line, only when named), tried in a random order, the
     /// first that fits: `--encounter-kinds furniture` records only furniture in the way.
     #[arg(long, value_delimiter = ',', requires = "encounters")]
     encounter_kinds: Vec<Encounter>,
@@ -457,7 +459,7 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
         noise: args.noise,
         encounters: args.encounters,
         encounter_kinds: if args.encounter_kinds.is_empty() {
-            Encounter::ALL.to_vec()
+            Encounter::DEFAULT.to_vec()
         } else {
             args.encounter_kinds.clone()
         },

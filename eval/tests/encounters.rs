@@ -187,7 +187,7 @@ fn every_kind_fits_and_the_expert_handles_it_without_contact() {
                     "the path passes {off_m} m from the opening's middle"
                 );
             }
-            Encounter::PersonAhead | Encounter::PersonOncoming => {
+            Encounter::PersonAhead | Encounter::PersonOncoming | Encounter::PersonHeadOn => {
                 assert_eq!(s.people.len(), base.scenario.people.len() + 1);
                 let person = s.people.last().unwrap();
                 let first = &person.route[0];
@@ -196,6 +196,32 @@ fn every_kind_fits_and_the_expert_handles_it_without_contact() {
                     from_start >= 2.0,
                     "{kind:?} starts {from_start} m from the robot"
                 );
+                if *kind == Encounter::PersonHeadOn {
+                    // Along the robot's own line, up to its start: they must meet.
+                    let path = first_leg(&base, s, &options);
+                    for q in &person.route {
+                        let off_m = path
+                            .poses
+                            .iter()
+                            .map(|p| (p.x_m - q.x_m).hypot(p.y_m - q.y_m))
+                            .fold(f64::INFINITY, f64::min);
+                        let behind_m = (q.x_m - s.start.x_m).hypot(q.y_m - s.start.y_m);
+                        assert!(
+                            off_m < 0.2 || behind_m < 2.6,
+                            "route point {q:?} {off_m} m off the path"
+                        );
+                    }
+                    let last = person.route.last().unwrap();
+                    let (p0, p1) = (&path.poses[0], &path.poses[1]);
+                    let heading = (p1.y_m - p0.y_m).atan2(p1.x_m - p0.x_m);
+                    let (dx, dy) = (last.x_m - p0.x_m, last.y_m - p0.y_m);
+                    let ahead_m = dx * heading.cos() + dy * heading.sin();
+                    // (A wall behind the start cuts the route short there.)
+                    assert!(
+                        ahead_m < 0.5,
+                        "the route ends {ahead_m} m ahead of the start"
+                    );
+                }
             }
         }
         let (result, _) =

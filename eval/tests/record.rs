@@ -444,7 +444,7 @@ fn encounters_come_only_of_the_kinds_asked_for() {
     );
     assert!(!episodes["furniture"].as_array().unwrap().is_empty());
     let all = RecordOptions {
-        encounter_kinds: Encounter::ALL.to_vec(),
+        encounter_kinds: Encounter::DEFAULT.to_vec(),
         ..o.clone()
     };
     assert_ne!(all.dataset_id().unwrap(), summary.dataset_id);

@@ -13,6 +13,12 @@
 //! - [`Encounter::PersonOncoming`]: a person 7–18 m ahead walking towards the robot along the
 //!   path at 0.4–0.9 m/s, 0.3–0.7 m to their right of it (room to pass), and on past the
 //!   robot's start;
+//! - [`Encounter::PersonHeadOn`]: the same, but along the path's centre line (within
+//!   0.15 m), as the person walks task C's corridor: met head-on, the robot has to
+//!   stop and let the person walk round it, and drive on only once they are past, also when they
+//!   have left the camera's view beside it. LPE-Net r26 alone drove on too soon and touched the
+//!   person in 6 of 10 runs of task C (docs/evaluation.md, round 26). Not among the kinds a
+//!   recording draws from by default ([`Encounter::DEFAULT`]);
 //! - [`Encounter::GlassDoor`]: a shut glass door from wall to wall across the path 4–12 m
 //!   ahead, where the passage is at most 3 m wide. The floor plan does not have it; the
 //!   expert stops short of it and waits until the judge's intervention carries the robot
@@ -65,10 +71,25 @@ pub enum Encounter {
     RobotParked,
     Furniture,
     OpenGlassDoor,
+    PersonHeadOn,
 }
 
 impl Encounter {
-    pub const ALL: [Encounter; 6] = [
+    /// Every kind, as the command line names them.
+    pub const ALL: [Encounter; 7] = [
+        Encounter::PersonAhead,
+        Encounter::PersonOncoming,
+        Encounter::GlassDoor,
+        Encounter::RobotParked,
+        Encounter::Furniture,
+        Encounter::OpenGlassDoor,
+        Encounter::PersonHeadOn,
+    ];
+
+    /// The kinds a recording draws from unless told (`--encounter-kinds`): all but
+    /// [`Encounter::PersonHeadOn`], which came later, so that the recordings made before it
+    /// stay reproducible from their commands.
+    pub const DEFAULT: [Encounter; 6] = [
         Encounter::PersonAhead,
         Encounter::PersonOncoming,
         Encounter::GlassDoor,
@@ -86,6 +107,7 @@ impl Encounter {
             Encounter::RobotParked => "robot_parked",
             Encounter::Furniture => "furniture",
             Encounter::OpenGlassDoor => "open_glass_door",
+            Encounter::PersonHeadOn => "person_head_on",
         }
     }
 
@@ -116,6 +138,8 @@ const PERSON_RADIUS_M: f64 = 0.25;
 const ROUTE_CLEARANCE_M: f64 = 0.05;
 /// Spacing of a person's route points along the path.
 const ROUTE_STEP_M: f64 = 1.0;
+/// Furthest a head-on person's route lies off the path's centre line, either way.
+const HEAD_ON_OFFSET_M: f64 = 0.15;
 /// Clearance from the floor plan's walls along the path where a person and the robot can
 /// pass each other (a passage about 1.4 m wide; in narrower ones each would wait for the
 /// other).
@@ -386,7 +410,7 @@ fn place(
             let speed = rng.gen_range(0.25..0.45);
             scenario.people.push(person(&points, speed, rng));
         }
-        Encounter::PersonOncoming => {
+        Encounter::PersonOncoming | Encounter::PersonHeadOn => {
             if length_m < 9.0 {
                 return None;
             }
@@ -401,10 +425,14 @@ fn place(
                 return None;
             }
             // Past the robot's start, keeping to their own right (the robot's left), as people
-            // do in a corridor.
+            // do in a corridor; or head-on, along the robot's own line.
             let near = rng.gen_range(-2.5..-1.0);
-            let left_m: f64 = rng.gen_range(0.4..0.7);
-            let points = [left_m, 0.3]
+            let lefts_m = if kind == Encounter::PersonOncoming {
+                [rng.gen_range(0.4..0.7), 0.3]
+            } else {
+                [rng.gen_range(-HEAD_ON_OFFSET_M..HEAD_ON_OFFSET_M); 2]
+            };
+            let points = lefts_m
                 .into_iter()
                 .map(|l| route.walk(far, near, l, world))
                 .find(|p| polyline_m(p) >= far - 1.0)?;

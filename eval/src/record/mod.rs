@@ -127,7 +127,7 @@ impl Default for RecordOptions {
             samples: 100_000,
             noise: 0.2,
             encounters: 0.0,
-            encounter_kinds: encounter::Encounter::ALL.to_vec(),
+            encounter_kinds: encounter::Encounter::DEFAULT.to_vec(),
             noise_peak_radps: 0.4,
             seed: 0,
             jobs: 1,
