@@ -428,9 +428,9 @@ fn place(
             // do in a corridor; or head-on, along the robot's own line.
             let near = rng.gen_range(-2.5..-1.0);
             let lefts_m = if kind == Encounter::PersonOncoming {
-                [rng.gen_range(0.4..0.7), 0.3]
+                vec![rng.gen_range(0.4..0.7), 0.3]
             } else {
-                [rng.gen_range(-HEAD_ON_OFFSET_M..HEAD_ON_OFFSET_M); 2]
+                vec![rng.gen_range(-HEAD_ON_OFFSET_M..HEAD_ON_OFFSET_M)]
             };
             let points = lefts_m
                 .into_iter()
