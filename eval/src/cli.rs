@@ -312,6 +312,10 @@ pub struct RecordArgs {
     /// first that fits: `--encounter-kinds furniture` records only furniture in the way.
     #[arg(long, value_delimiter = ',', requires = "encounters")]
     encounter_kinds: Vec<Encounter>,
+    /// Probability that an episode starts facing a wall 0.5–1.1 m away (its first goal then
+    /// to the side or behind): the turn on the spot at a goal by a corridor's end wall.
+    #[arg(long, default_value_t = 0.0)]
+    wall_starts: f64,
     /// Largest turn-rate offset of a noise pulse in rad/s (the expert's command filter ignores
     /// pushes up to this size, so its labels correct them).
     #[arg(long, default_value_t = 0.4)]
@@ -463,6 +467,7 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
         } else {
             args.encounter_kinds.clone()
         },
+        wall_starts: args.wall_starts,
         noise_peak_radps: args.noise_peak_radps,
         seed: args.seed,
         jobs: args.jobs.unwrap_or_else(|| {
@@ -515,6 +520,12 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
     );
     for (kind, episodes) in &summary.encounters {
         println!("  {} episodes with a scripted {kind}", episodes.len());
+    }
+    if !summary.wall_starts.is_empty() {
+        println!(
+            "  {} episodes started facing a wall",
+            summary.wall_starts.len()
+        );
     }
     Ok(())
 }

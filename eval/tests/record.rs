@@ -458,6 +458,100 @@ fn encounters_come_only_of_the_kinds_asked_for() {
     }
 }
 
+/// `wall_starts`: every episode starts facing its nearest wall 0.5–1.1 m away, and the
+/// expert's first labels turn on the spot; the index lists the episodes, the option is part of
+/// the dataset id, and a probability outside [0, 1] is refused.
+#[test]
+fn wall_starts_face_a_wall_and_the_expert_turns_on_the_spot() {
+    let mut o = options(0.0, 2);
+    o.scenarios = vec![scenario("train_office.yaml")];
+    o.samples = 200;
+    o.episode_s = 6.0;
+    o.wall_starts = 1.0;
+    let out = tempfile::tempdir().unwrap();
+    let summary = record(&o, out.path(), &|_| {}).unwrap();
+    let (index, fields) = read_all(out.path());
+    assert_eq!(index["wall_starts"]["probability"], 1.0);
+    let listed: Vec<u32> = index["wall_starts"]["episodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e.as_u64().unwrap() as u32)
+        .collect();
+    assert_eq!(listed, summary.wall_starts);
+    let episodes: Vec<u32> = fields["episode"]
+        .chunks(4)
+        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect();
+    let mut distinct = episodes.clone();
+    distinct.dedup();
+    assert!(distinct.len() >= 3, "{distinct:?}");
+    assert_eq!(listed, distinct);
+
+    let prepared =
+        eval::table::run::Prepared::load(&scenario("train_office.yaml"), &o.run).unwrap();
+    let walls = sim::raycast::WallGrid::from_grid(&prepared.plan);
+    let pose = f32s(&fields["pose_true"]);
+    let label = f32s(&fields["label"]);
+    for e in &distinct {
+        let first = episodes.iter().position(|x| x == e).unwrap();
+        let (x, y, yaw) = (
+            f64::from(pose[3 * first]),
+            f64::from(pose[3 * first + 1]),
+            f64::from(pose[3 * first + 2]),
+        );
+        // Straight ahead (within the start's 0.3 rad and the first cycle's turn) a wall is
+        // close, and no wall is closer than 0.5 m in any direction.
+        let ahead = (-5..=5)
+            .filter_map(|k| {
+                let a = yaw + f64::from(k) * 0.1;
+                walls.cast(x, y, a.cos(), a.sin(), 3.0).map(|h| h.dist_m)
+            })
+            .fold(f64::INFINITY, f64::min);
+        assert!(ahead <= 1.1 + 0.05, "episode {e}: wall {ahead} m ahead");
+        let around = (0..72)
+            .filter_map(|k| {
+                let a = f64::from(k) * std::f64::consts::TAU / 72.0;
+                walls.cast(x, y, a.cos(), a.sin(), 3.0).map(|h| h.dist_m)
+            })
+            .fold(f64::INFINITY, f64::min);
+        assert!(around >= 0.5 - 0.05, "episode {e}: wall {around} m away");
+    }
+    // The expert turns on the spot before it drives off: in the first second of most
+    // episodes a label turns hard at walking pace or less.
+    let t = f32s(&fields["t_s"]);
+    let turning = distinct
+        .iter()
+        .filter(|e| {
+            (0..episodes.len()).any(|i| {
+                episodes[i] == **e
+                    && t[i] <= 1.0
+                    && label[2 * i].abs() < 0.3
+                    && label[2 * i + 1].abs() > 0.3
+            })
+        })
+        .count();
+    assert!(
+        2 * turning > distinct.len(),
+        "{turning} of {}",
+        distinct.len()
+    );
+
+    let off = RecordOptions {
+        wall_starts: 0.0,
+        ..o.clone()
+    };
+    assert_ne!(off.dataset_id().unwrap(), summary.dataset_id);
+    let err = RecordOptions {
+        wall_starts: 1.5,
+        ..o
+    }
+    .validate()
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("wall_starts") && err.contains("1.5"), "{err}");
+}
+
 /// `eval record --record-dir`: every stored episode also leaves its run log, named after the
 /// samples' episode number, which replays through the agent's AMCL exactly as it ran; the
 /// dataset is the same as without logs.

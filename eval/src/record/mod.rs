@@ -24,10 +24,11 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
-use protocol::{ControllerKind, Pose2D};
+use protocol::{normalize_angle, ControllerKind, Pose2D};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sha2::{Digest, Sha256};
+use sim::raycast::WallGrid;
 use sim::scenario::{PointSpec, PoseSpec, Role};
 use sim::{Scenario, SimConfig, World};
 
@@ -77,6 +78,10 @@ pub struct RecordOptions {
     pub encounters: f64,
     /// ... of one of these kinds, tried in a random order per episode, the first that fits.
     pub encounter_kinds: Vec<encounter::Encounter>,
+    /// Probability that an episode starts facing a wall up close ([`WALL_START_M`] from the
+    /// robot's centre), so that its first goal lies to the side or behind: the states where a
+    /// robot that has just reached a goal at a corridor's end must turn round on the spot.
+    pub wall_starts: f64,
     /// Largest turn-rate offset of a noise pulse. In a noisy episode the expert's
     /// resynchronisation threshold (`ExpertConfig::motion_resync_radps`: it adopts the
     /// measured motion as its own command state when the two differ by more) is raised above
@@ -128,6 +133,7 @@ impl Default for RecordOptions {
             noise: 0.2,
             encounters: 0.0,
             encounter_kinds: encounter::Encounter::DEFAULT.to_vec(),
+            wall_starts: 0.0,
             noise_peak_radps: 0.4,
             seed: 0,
             jobs: 1,
@@ -153,6 +159,8 @@ pub struct Summary {
     pub noisy_episodes: usize,
     /// The stored episodes that got each scripted encounter, by kind.
     pub encounters: BTreeMap<&'static str, Vec<u32>>,
+    /// The stored episodes that started facing a wall.
+    pub wall_starts: Vec<u32>,
     pub shards: usize,
     /// Simulated seconds of all episodes run (including samples cut off at the end).
     pub simulated_s: f64,
@@ -228,6 +236,13 @@ impl RecordOptions {
             return Err(invalid(
                 "encounters",
                 self.encounters.to_string(),
+                "must be in [0, 1]",
+            ));
+        }
+        if !(0.0..=1.0).contains(&self.wall_starts) {
+            return Err(invalid(
+                "wall_starts",
+                self.wall_starts.to_string(),
                 "must be in [0, 1]",
             ));
         }
@@ -360,6 +375,10 @@ impl RecordOptions {
             let kinds = encounter::Encounter::names(&self.encounter_kinds);
             h.update(format!("encounters {:?} {kinds:?}\n", self.encounters).as_bytes());
         }
+        if self.wall_starts > 0.0 {
+            // Hashed only when on, so the ids of recordings made before it stay as they were.
+            h.update(format!("wall_starts {:?}\n", self.wall_starts).as_bytes());
+        }
         if let Some(p) = &self.policy {
             let bytes = std::fs::read(&p.model).map_err(|e| {
                 RecordError::Run(TableError::Setup {
@@ -392,6 +411,8 @@ pub fn episode_seed(seed: u64, episode: u64) -> u64 {
 struct Loaded {
     prepared: Prepared,
     world: World,
+    /// The floor plan's walls, for the rays of a wall start.
+    walls: WallGrid,
 }
 
 /// Clearance around the robot's disc that a start (people included) and a goal (furniture
@@ -400,6 +421,12 @@ const START_CLEARANCE_M: f64 = 0.15;
 const GOAL_CLEARANCE_M: f64 = 0.3;
 /// Start→goal and goal→goal straight-line distance at least.
 const MIN_LEG_M: f64 = 4.0;
+/// A wall start: the nearest wall face lies this far from the robot's centre, straight ahead
+/// up to [`WALL_START_YAW_RAD`]. Task A's second goal leaves the robot 0.8 m from the wall.
+const WALL_START_M: std::ops::RangeInclusive<f64> = 0.5..=1.1;
+const WALL_START_YAW_RAD: f64 = 0.3;
+/// Rays cast round a candidate start to find its nearest wall.
+const WALL_START_RAYS: u32 = 72;
 
 /// Where an episode starts and the goals it visits, with their distance fields for the judge.
 struct EpisodePlan {
@@ -408,10 +435,25 @@ struct EpisodePlan {
     goals: Vec<(f64, f64)>,
 }
 
+/// The direction (map-frame yaw) and distance of the nearest wall face seen from (x, y), over
+/// [`WALL_START_RAYS`] rays up to `max_m`.
+fn nearest_wall(walls: &WallGrid, x_m: f64, y_m: f64, max_m: f64) -> Option<(f64, f64)> {
+    (0..WALL_START_RAYS)
+        .filter_map(|i| {
+            let yaw = std::f64::consts::TAU * f64::from(i) / f64::from(WALL_START_RAYS);
+            walls
+                .cast(x_m, y_m, yaw.cos(), yaw.sin(), max_m)
+                .map(|hit| (yaw, hit.dist_m))
+        })
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+}
+
 /// Start and goals of one episode: random points in the plan's inflated free space, clear of
 /// the world's furniture and glass, each goal reachable along the plan from the point before.
-/// `None` when the scenario has no room for them.
-fn plan_episode(loaded: &Loaded, seed: u64) -> Option<EpisodePlan> {
+/// With `wall_start`, the start is the first candidate whose nearest wall is within
+/// [`WALL_START_M`], turned to face it (up to [`WALL_START_YAW_RAD`] off), so the robot must
+/// turn on the spot before it can drive. `None` when the scenario has no room for them.
+fn plan_episode(loaded: &Loaded, seed: u64, wall_start: bool) -> Option<EpisodePlan> {
     let prepared = &loaded.prepared;
     let radius_m = SimConfig::default().base.radius_m;
     let pairs = planning::sample::sample_pairs(
@@ -430,10 +472,25 @@ fn plan_episode(loaded: &Loaded, seed: u64) -> Option<EpisodePlan> {
             .disc_overlap(p.x_m, p.y_m, radius_m + r, None, people)
             .is_none()
     };
-    let start = pairs
-        .iter()
-        .map(|(s, _)| *s)
-        .find(|s| clear(s, START_CLEARANCE_M, true))?;
+    let start = if wall_start {
+        let mut turn = ChaCha8Rng::seed_from_u64(seed ^ 0x0A11_57A7);
+        pairs
+            .iter()
+            .flat_map(|(s, g)| [*s, *g])
+            .filter(|s| clear(s, START_CLEARANCE_M, true))
+            .find_map(|s| {
+                let (yaw, d) = nearest_wall(&loaded.walls, s.x_m, s.y_m, *WALL_START_M.end())?;
+                WALL_START_M.contains(&d).then(|| {
+                    let off = turn.gen_range(-WALL_START_YAW_RAD..=WALL_START_YAW_RAD);
+                    Pose2D::new(s.x_m, s.y_m, normalize_angle(yaw + off))
+                })
+            })?
+    } else {
+        pairs
+            .iter()
+            .map(|(s, _)| *s)
+            .find(|s| clear(s, START_CLEARANCE_M, true))?
+    };
     let mut goals: Vec<(f64, f64)> = Vec::new();
     let mut distances = Vec::new();
     let mut last = start;
@@ -463,6 +520,8 @@ fn plan_episode(loaded: &Loaded, seed: u64) -> Option<EpisodePlan> {
 struct Episode {
     scenario: usize,
     noisy: bool,
+    /// Started facing a wall up close (`RecordOptions::wall_starts`).
+    wall_start: bool,
     encounter: Option<encounter::Encounter>,
     samples: Vec<Sample>,
     simulated_s: f64,
@@ -480,9 +539,12 @@ fn run_episode(
 ) -> Result<Episode, RecordError> {
     let seed = episode_seed(options.seed, episode);
     let noisy = ChaCha8Rng::seed_from_u64(seed).gen_bool(options.noise);
+    let wall_start =
+        ChaCha8Rng::seed_from_u64(mix(seed ^ 0x0A11_0000)).gen_bool(options.wall_starts);
     let empty = Episode {
         scenario,
         noisy,
+        wall_start,
         encounter: None,
         samples: Vec::new(),
         simulated_s: 0.0,
@@ -491,7 +553,7 @@ fn run_episode(
         start,
         goal_distance,
         goals,
-    }) = plan_episode(loaded, seed)
+    }) = plan_episode(loaded, seed, wall_start)
     else {
         tracing::warn!(scenario = %loaded.prepared.scenario.name, seed, "no room for an episode");
         return Ok(empty);
@@ -576,6 +638,7 @@ fn run_episode(
     Ok(Episode {
         scenario,
         noisy,
+        wall_start,
         encounter,
         samples: recorder.samples,
         simulated_s,
@@ -622,7 +685,12 @@ pub fn record(
                 path: path.display().to_string(),
                 reason: e.to_string(),
             })?;
-            Ok(Loaded { prepared, world })
+            let walls = WallGrid::from_grid(&prepared.plan);
+            Ok(Loaded {
+                prepared,
+                world,
+                walls,
+            })
         })
         .collect::<Result<_, RecordError>>()?;
     std::fs::create_dir_all(out).map_err(|e| RecordError::Write {
@@ -632,6 +700,7 @@ pub fn record(
     let mut writer = ShardWriter::new(out, options.image_px, options.shard_samples);
     let (mut episodes, mut noisy_episodes, mut simulated_s) = (0usize, 0usize, 0.0f64);
     let mut encounters: BTreeMap<&'static str, Vec<u32>> = BTreeMap::new();
+    let mut wall_starts: Vec<u32> = Vec::new();
     let mut next_episode = 0u64;
     // Episodes that give nothing (no room, blocked start) must not loop for ever.
     let mut empty_in_a_row = 0usize;
@@ -696,6 +765,9 @@ pub fn record(
             if let Some(kind) = episode.encounter {
                 encounters.entry(kind.as_str()).or_default().push(id);
             }
+            if episode.wall_start {
+                wall_starts.push(id);
+            }
             for sample in episode.samples {
                 if writer.samples() >= options.samples {
                     break;
@@ -730,6 +802,12 @@ pub fn record(
         "kinds": encounter::Encounter::names(&options.encounter_kinds),
         "episodes": encounters,
     });
+    if options.wall_starts > 0.0 {
+        header["wall_starts"] = serde_json::json!({
+            "probability": options.wall_starts,
+            "episodes": wall_starts,
+        });
+    }
     let shards = writer.finish(&header)?;
     Ok(Summary {
         dataset_id,
@@ -737,6 +815,7 @@ pub fn record(
         episodes,
         noisy_episodes,
         encounters,
+        wall_starts,
         shards,
         simulated_s,
         wall_s: started.elapsed().as_secs_f64(),
