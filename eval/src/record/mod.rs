@@ -422,7 +422,8 @@ const GOAL_CLEARANCE_M: f64 = 0.3;
 /// Start→goal and goal→goal straight-line distance at least.
 const MIN_LEG_M: f64 = 4.0;
 /// A wall start: the nearest wall face lies this far from the robot's centre, straight ahead
-/// up to [`WALL_START_YAW_RAD`]. Task A's second goal leaves the robot 0.8 m from the wall.
+/// up to [`WALL_START_YAW_RAD`]. Past task A's second goal the robot stands 0.7–0.8 m from
+/// the corridor's end wall.
 const WALL_START_M: std::ops::RangeInclusive<f64> = 0.5..=1.1;
 const WALL_START_YAW_RAD: f64 = 0.3;
 /// Rays cast round a candidate start to find its nearest wall.
