@@ -62,6 +62,12 @@ fn f32s(data: &[u8]) -> Vec<f32> {
         .collect()
 }
 
+fn u32s(data: &[u8]) -> Vec<u32> {
+    data.chunks_exact(4)
+        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect()
+}
+
 /// Every field of a recording concatenated over its shards (descr checked against the index).
 fn read_all(dir: &Path) -> (serde_json::Value, BTreeMap<String, Vec<u8>>) {
     let index: serde_json::Value =
@@ -479,10 +485,7 @@ fn wall_starts_face_a_wall_and_the_expert_turns_on_the_spot() {
         .map(|e| e.as_u64().unwrap() as u32)
         .collect();
     assert_eq!(listed, summary.wall_starts);
-    let episodes: Vec<u32> = fields["episode"]
-        .chunks(4)
-        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-        .collect();
+    let episodes = u32s(&fields["episode"]);
     let mut distinct = episodes.clone();
     distinct.dedup();
     assert!(distinct.len() >= 3, "{distinct:?}");
@@ -500,21 +503,17 @@ fn wall_starts_face_a_wall_and_the_expert_turns_on_the_spot() {
             f64::from(pose[3 * first + 1]),
             f64::from(pose[3 * first + 2]),
         );
+        // The nearest wall over these headings.
+        let nearest = |headings: &mut dyn Iterator<Item = f64>| {
+            headings
+                .filter_map(|a| walls.cast(x, y, a.cos(), a.sin(), 3.0).map(|h| h.dist_m))
+                .fold(f64::INFINITY, f64::min)
+        };
         // Straight ahead (within the start's 0.3 rad and the first cycle's turn) a wall is
         // close, and no wall is closer than 0.5 m in any direction.
-        let ahead = (-5..=5)
-            .filter_map(|k| {
-                let a = yaw + f64::from(k) * 0.1;
-                walls.cast(x, y, a.cos(), a.sin(), 3.0).map(|h| h.dist_m)
-            })
-            .fold(f64::INFINITY, f64::min);
+        let ahead = nearest(&mut (-5..=5).map(|k| yaw + f64::from(k) * 0.1));
         assert!(ahead <= 1.1 + 0.05, "episode {e}: wall {ahead} m ahead");
-        let around = (0..72)
-            .filter_map(|k| {
-                let a = f64::from(k) * std::f64::consts::TAU / 72.0;
-                walls.cast(x, y, a.cos(), a.sin(), 3.0).map(|h| h.dist_m)
-            })
-            .fold(f64::INFINITY, f64::min);
+        let around = nearest(&mut (0..72).map(|k| f64::from(k) * std::f64::consts::TAU / 72.0));
         assert!(around >= 0.5 - 0.05, "episode {e}: wall {around} m away");
     }
     // The expert turns on the spot before it drives off: in the first second of most
@@ -573,10 +572,7 @@ fn the_command_line_records_a_run_log_per_episode() {
     assert!(status.success());
 
     let (_, fields) = read_all(out.path());
-    let mut episodes: Vec<u32> = fields["episode"]
-        .chunks_exact(4)
-        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-        .collect();
+    let mut episodes = u32s(&fields["episode"]);
     episodes.dedup();
     assert!(episodes.len() >= 2, "episodes {episodes:?}");
     let names: Vec<String> = std::fs::read_dir(logs.path())
