@@ -316,6 +316,11 @@ pub struct RecordArgs {
     /// to the side or behind): the turn on the spot at a goal by a corridor's end wall.
     #[arg(long, default_value_t = 0.0)]
     wall_starts: f64,
+    /// Probability that an episode (not a wall start) starts 0.6–1.5 m from its first goal,
+    /// with the goal to the side or behind: the way back to a goal driven past just outside
+    /// the tolerance.
+    #[arg(long, default_value_t = 0.0)]
+    goal_starts: f64,
     /// Largest turn-rate offset of a noise pulse in rad/s (the expert's command filter ignores
     /// pushes up to this size, so its labels correct them).
     #[arg(long, default_value_t = 0.4)]
@@ -468,6 +473,7 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
             args.encounter_kinds.clone()
         },
         wall_starts: args.wall_starts,
+        goal_starts: args.goal_starts,
         noise_peak_radps: args.noise_peak_radps,
         seed: args.seed,
         jobs: args.jobs.unwrap_or_else(|| {
@@ -525,6 +531,12 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
         println!(
             "  {} episodes started facing a wall",
             summary.wall_starts.len()
+        );
+    }
+    if !summary.goal_starts.is_empty() {
+        println!(
+            "  {} episodes started next to their first goal",
+            summary.goal_starts.len()
         );
     }
     Ok(())

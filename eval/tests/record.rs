@@ -551,6 +551,79 @@ fn wall_starts_face_a_wall_and_the_expert_turns_on_the_spot() {
     assert!(err.contains("wall_starts") && err.contains("1.5"), "{err}");
 }
 
+/// `eval record --goal-starts 1`: every episode starts next to its first goal with the goal
+/// to the side or behind, so its DLM starts as a turn and the expert turns hard towards it
+/// at walking pace; the index lists the episodes; the option is part of the dataset id and
+/// checked, naming the field.
+#[test]
+fn goal_starts_begin_beside_the_first_goal_and_the_expert_turns_to_it() {
+    let mut o = options(0.0, 2);
+    o.scenarios = vec![scenario("train_office.yaml")];
+    o.samples = 200;
+    o.episode_s = 6.0;
+    o.goal_starts = 1.0;
+    let out = tempfile::tempdir().unwrap();
+    let summary = record(&o, out.path(), &|_| {}).unwrap();
+    let (index, fields) = read_all(out.path());
+    assert_eq!(index["goal_starts"]["probability"], 1.0);
+    assert!(index.get("wall_starts").is_none());
+    let listed: Vec<u32> = index["goal_starts"]["episodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e.as_u64().unwrap() as u32)
+        .collect();
+    assert_eq!(listed, summary.goal_starts);
+    let episodes = u32s(&fields["episode"]);
+    let mut distinct = episodes.clone();
+    distinct.dedup();
+    assert!(distinct.len() >= 3, "{distinct:?}");
+    assert_eq!(listed, distinct);
+    let (label, dlm, t) = (f32s(&fields["label"]), &fields["dlm"], f32s(&fields["t_s"]));
+    // The goal is 0.9 rad or more off the heading and at most 1.5 m away: the DLM of an
+    // episode's first second is a turn (0 left, 1 right), and in its first 2 s the expert
+    // turns hard (|ω| > 0.3 of the limit) at under half speed.
+    let first_turns = distinct
+        .iter()
+        .filter(|e| (0..episodes.len()).any(|i| episodes[i] == **e && t[i] <= 1.0 && dlm[i] <= 1))
+        .count();
+    assert!(
+        2 * first_turns > distinct.len(),
+        "{first_turns} of {}",
+        distinct.len()
+    );
+    let turning = distinct
+        .iter()
+        .filter(|e| {
+            (0..episodes.len()).any(|i| {
+                episodes[i] == **e
+                    && t[i] <= 2.0
+                    && label[2 * i].abs() < 0.5
+                    && label[2 * i + 1].abs() > 0.3
+            })
+        })
+        .count();
+    assert!(
+        2 * turning > distinct.len(),
+        "{turning} of {}",
+        distinct.len()
+    );
+
+    let off = RecordOptions {
+        goal_starts: 0.0,
+        ..o.clone()
+    };
+    assert_ne!(off.dataset_id().unwrap(), summary.dataset_id);
+    let err = RecordOptions {
+        goal_starts: -0.1,
+        ..o
+    }
+    .validate()
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("goal_starts") && err.contains("-0.1"), "{err}");
+}
+
 /// `eval record --record-dir`: every stored episode also leaves its run log, named after the
 /// samples' episode number, which replays through the agent's AMCL exactly as it ran; the
 /// dataset is the same as without logs.

@@ -82,6 +82,11 @@ pub struct RecordOptions {
     /// robot's centre), so that its first goal lies to the side or behind: the states where a
     /// robot that has just reached a goal at a corridor's end must turn round on the spot.
     pub wall_starts: f64,
+    /// Probability that an episode (not already a wall start) starts near its first goal
+    /// ([`GOAL_START_M`] away, with the goal to the side or behind): the states where a robot
+    /// that drove past a goal just outside the tolerance must turn back to it instead of
+    /// circling round it.
+    pub goal_starts: f64,
     /// Largest turn-rate offset of a noise pulse. In a noisy episode the expert's
     /// resynchronisation threshold (`ExpertConfig::motion_resync_radps`: it adopts the
     /// measured motion as its own command state when the two differ by more) is raised above
@@ -134,6 +139,7 @@ impl Default for RecordOptions {
             encounters: 0.0,
             encounter_kinds: encounter::Encounter::DEFAULT.to_vec(),
             wall_starts: 0.0,
+            goal_starts: 0.0,
             noise_peak_radps: 0.4,
             seed: 0,
             jobs: 1,
@@ -161,6 +167,8 @@ pub struct Summary {
     pub encounters: BTreeMap<&'static str, Vec<u32>>,
     /// The stored episodes that started facing a wall.
     pub wall_starts: Vec<u32>,
+    /// The stored episodes that started near their first goal.
+    pub goal_starts: Vec<u32>,
     pub shards: usize,
     /// Simulated seconds of all episodes run (including samples cut off at the end).
     pub simulated_s: f64,
@@ -243,6 +251,13 @@ impl RecordOptions {
             return Err(invalid(
                 "wall_starts",
                 self.wall_starts.to_string(),
+                "must be in [0, 1]",
+            ));
+        }
+        if !(0.0..=1.0).contains(&self.goal_starts) {
+            return Err(invalid(
+                "goal_starts",
+                self.goal_starts.to_string(),
                 "must be in [0, 1]",
             ));
         }
@@ -379,6 +394,9 @@ impl RecordOptions {
             // Hashed only when on, so the ids of recordings made before it stay as they were.
             h.update(format!("wall_starts {:?}\n", self.wall_starts).as_bytes());
         }
+        if self.goal_starts > 0.0 {
+            h.update(format!("goal_starts {:?}\n", self.goal_starts).as_bytes());
+        }
         if let Some(p) = &self.policy {
             let bytes = std::fs::read(&p.model).map_err(|e| {
                 RecordError::Run(TableError::Setup {
@@ -415,6 +433,26 @@ struct Loaded {
     walls: WallGrid,
 }
 
+impl Loaded {
+    fn new(prepared: Prepared) -> Result<Self, RecordError> {
+        let world = World::new(
+            prepared.scenario.clone(),
+            prepared.plan.clone(),
+            SimConfig::default(),
+        )
+        .map_err(|e| RecordError::Scenario {
+            path: prepared.path.display().to_string(),
+            reason: e.to_string(),
+        })?;
+        let walls = WallGrid::from_grid(&prepared.plan);
+        Ok(Self {
+            prepared,
+            world,
+            walls,
+        })
+    }
+}
+
 /// Clearance around the robot's disc that a start (people included) and a goal (furniture
 /// and glass) keep.
 const START_CLEARANCE_M: f64 = 0.15;
@@ -428,6 +466,26 @@ const WALL_START_M: std::ops::RangeInclusive<f64> = 0.5..=1.1;
 const WALL_START_YAW_RAD: f64 = 0.3;
 /// Rays cast round a candidate start to find its nearest wall.
 const WALL_START_RAYS: u32 = 72;
+/// A goal start: the first goal lies this far from the robot's centre (DLM-Net r5 alone
+/// passed task D's goals 0.5–0.9 m off and circled round them), at least
+/// [`GOAL_START_OFF_RAD`] off its heading, and the way there along the floor plan is at most
+/// [`GOAL_START_DETOUR`] times the straight line (no wall between).
+const GOAL_START_M: std::ops::RangeInclusive<f64> = 0.6..=1.5;
+const GOAL_START_OFF_RAD: std::ops::RangeInclusive<f64> = 0.9..=std::f64::consts::PI;
+const GOAL_START_DETOUR: f64 = 1.3;
+/// Candidate places tried round the first goal for a goal start.
+const GOAL_START_TRIES: usize = 64;
+
+/// How an episode starts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum StartKind {
+    /// At a random free place, facing a random way.
+    Open,
+    /// Facing a wall up close (`RecordOptions::wall_starts`).
+    Wall,
+    /// Near the first goal, which lies to the side or behind (`RecordOptions::goal_starts`).
+    NearGoal,
+}
 
 /// Where an episode starts and the goals it visits, with their distance fields for the judge.
 struct EpisodePlan {
@@ -453,8 +511,10 @@ fn nearest_wall(walls: &WallGrid, x_m: f64, y_m: f64, max_m: f64) -> Option<(f64
 /// the world's furniture and glass, each goal reachable along the plan from the point before.
 /// With `wall_start`, the start is the first candidate whose nearest wall is within
 /// [`WALL_START_M`], turned to face it (up to [`WALL_START_YAW_RAD`] off), so the robot must
-/// turn on the spot before it can drive. `None` when the scenario has no room for them.
-fn plan_episode(loaded: &Loaded, seed: u64, wall_start: bool) -> Option<EpisodePlan> {
+/// turn on the spot before it can drive. With a goal start, the start is then moved next to
+/// the first goal ([`GOAL_START_M`], the goal off its heading by [`GOAL_START_OFF_RAD`]).
+/// `None` when the scenario has no room for them.
+fn plan_episode(loaded: &Loaded, seed: u64, kind: StartKind) -> Option<EpisodePlan> {
     let prepared = &loaded.prepared;
     let radius_m = SimConfig::default().base.radius_m;
     let pairs = planning::sample::sample_pairs(
@@ -473,7 +533,7 @@ fn plan_episode(loaded: &Loaded, seed: u64, wall_start: bool) -> Option<EpisodeP
             .disc_overlap(p.x_m, p.y_m, radius_m + r, None, people)
             .is_none()
     };
-    let start = if wall_start {
+    let start = if kind == StartKind::Wall {
         let mut turn = ChaCha8Rng::seed_from_u64(seed ^ 0x0A11_57A7);
         pairs
             .iter()
@@ -510,10 +570,52 @@ fn plan_episode(loaded: &Loaded, seed: u64, wall_start: bool) -> Option<EpisodeP
         distances.push(d);
         last = candidate;
     }
-    (goals.len() >= 2).then_some(EpisodePlan {
+    if goals.len() < 2 {
+        return None;
+    }
+    let start = if kind == StartKind::NearGoal {
+        near_goal_start(loaded, seed, goals[0], &distances[0], &clear)?
+    } else {
+        start
+    };
+    Some(EpisodePlan {
         start,
         goal_distance: distances,
         goals,
+    })
+}
+
+/// A start [`GOAL_START_M`] from `goal` with a free way to it, facing
+/// [`GOAL_START_OFF_RAD`] away from it to either side; `None` when no try fits.
+fn near_goal_start(
+    loaded: &Loaded,
+    seed: u64,
+    goal: (f64, f64),
+    distance: &GoalDistance,
+    clear: &dyn Fn(&Pose2D, f64, bool) -> bool,
+) -> Option<Pose2D> {
+    let mut rng = ChaCha8Rng::seed_from_u64(mix(seed ^ 0x060A_1557));
+    (0..GOAL_START_TRIES).find_map(|_| {
+        let d = rng.gen_range(GOAL_START_M);
+        let around = rng.gen_range(-std::f64::consts::PI..std::f64::consts::PI);
+        let off = rng.gen_range(GOAL_START_OFF_RAD) * if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
+        let (x_m, y_m) = (goal.0 + d * around.cos(), goal.1 + d * around.sin());
+        // Facing the goal is `around + π`; turned `off` from that.
+        let p = Pose2D::new(
+            x_m,
+            y_m,
+            normalize_angle(around + std::f64::consts::PI + off),
+        );
+        let way_m = distance.at(x_m, y_m);
+        (clear(&p, START_CLEARANCE_M, true)
+            && loaded
+                .prepared
+                .planning
+                .check_endpoint(planning::Endpoint::Start, p)
+                .is_ok()
+            && way_m.is_finite()
+            && way_m <= GOAL_START_DETOUR * d)
+            .then_some(p)
     })
 }
 
@@ -521,8 +623,7 @@ fn plan_episode(loaded: &Loaded, seed: u64, wall_start: bool) -> Option<EpisodeP
 struct Episode {
     scenario: usize,
     noisy: bool,
-    /// Started facing a wall up close (`RecordOptions::wall_starts`).
-    wall_start: bool,
+    start: StartKind,
     encounter: Option<encounter::Encounter>,
     samples: Vec<Sample>,
     simulated_s: f64,
@@ -542,10 +643,18 @@ fn run_episode(
     let noisy = ChaCha8Rng::seed_from_u64(seed).gen_bool(options.noise);
     let wall_start =
         ChaCha8Rng::seed_from_u64(mix(seed ^ 0x0A11_0000)).gen_bool(options.wall_starts);
+    // Its own draw, so that recordings without goal starts stay as they were.
+    let goal_start =
+        ChaCha8Rng::seed_from_u64(mix(seed ^ 0x060A_0000)).gen_bool(options.goal_starts);
+    let start_kind = match (wall_start, goal_start) {
+        (true, _) => StartKind::Wall,
+        (false, true) => StartKind::NearGoal,
+        (false, false) => StartKind::Open,
+    };
     let empty = Episode {
         scenario,
         noisy,
-        wall_start,
+        start: start_kind,
         encounter: None,
         samples: Vec::new(),
         simulated_s: 0.0,
@@ -554,7 +663,7 @@ fn run_episode(
         start,
         goal_distance,
         goals,
-    }) = plan_episode(loaded, seed, wall_start)
+    }) = plan_episode(loaded, seed, start_kind)
     else {
         tracing::warn!(scenario = %loaded.prepared.scenario.name, seed, "no room for an episode");
         return Ok(empty);
@@ -639,7 +748,7 @@ fn run_episode(
     Ok(Episode {
         scenario,
         noisy,
-        wall_start,
+        start: start_kind,
         encounter,
         samples: recorder.samples,
         simulated_s,
@@ -675,24 +784,7 @@ pub fn record(
     let loaded: Vec<Loaded> = files
         .into_iter()
         .chain(generated)
-        .map(|prepared| {
-            let path = prepared.path.clone();
-            let world = World::new(
-                prepared.scenario.clone(),
-                prepared.plan.clone(),
-                SimConfig::default(),
-            )
-            .map_err(|e| RecordError::Scenario {
-                path: path.display().to_string(),
-                reason: e.to_string(),
-            })?;
-            let walls = WallGrid::from_grid(&prepared.plan);
-            Ok(Loaded {
-                prepared,
-                world,
-                walls,
-            })
-        })
+        .map(Loaded::new)
         .collect::<Result<_, RecordError>>()?;
     std::fs::create_dir_all(out).map_err(|e| RecordError::Write {
         path: out.to_path_buf(),
@@ -702,6 +794,7 @@ pub fn record(
     let (mut episodes, mut noisy_episodes, mut simulated_s) = (0usize, 0usize, 0.0f64);
     let mut encounters: BTreeMap<&'static str, Vec<u32>> = BTreeMap::new();
     let mut wall_starts: Vec<u32> = Vec::new();
+    let mut goal_starts: Vec<u32> = Vec::new();
     let mut next_episode = 0u64;
     // Episodes that give nothing (no room, blocked start) must not loop for ever.
     let mut empty_in_a_row = 0usize;
@@ -766,8 +859,10 @@ pub fn record(
             if let Some(kind) = episode.encounter {
                 encounters.entry(kind.as_str()).or_default().push(id);
             }
-            if episode.wall_start {
-                wall_starts.push(id);
+            match episode.start {
+                StartKind::Wall => wall_starts.push(id),
+                StartKind::NearGoal => goal_starts.push(id),
+                StartKind::Open => {}
             }
             for sample in episode.samples {
                 if writer.samples() >= options.samples {
@@ -809,6 +904,12 @@ pub fn record(
             "episodes": wall_starts,
         });
     }
+    if options.goal_starts > 0.0 {
+        header["goal_starts"] = serde_json::json!({
+            "probability": options.goal_starts,
+            "episodes": goal_starts,
+        });
+    }
     let shards = writer.finish(&header)?;
     Ok(Summary {
         dataset_id,
@@ -817,6 +918,7 @@ pub fn record(
         noisy_episodes,
         encounters,
         wall_starts,
+        goal_starts,
         shards,
         simulated_s,
         wall_s: started.elapsed().as_secs_f64(),
@@ -855,4 +957,56 @@ fn index_header(options: &RecordOptions, dataset_id: &str, loaded: &[Loaded]) ->
             "path": l.prepared.path.display().to_string(),
         })).collect::<Vec<_>>(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn office() -> Loaded {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../sim/scenarios/train_office.yaml");
+        Loaded::new(Prepared::load(&path, &recording_run_options()).unwrap()).unwrap()
+    }
+
+    /// A goal start keeps the episode's goals and only moves the start next to the first,
+    /// with a free, direct way to it and the goal off the robot's heading.
+    #[test]
+    fn a_goal_start_puts_the_first_goal_beside_or_behind_the_robot() {
+        let loaded = office();
+        let mut fitted = 0;
+        for seed in 0..24 {
+            let (Some(open), Some(near)) = (
+                plan_episode(&loaded, seed, StartKind::Open),
+                plan_episode(&loaded, seed, StartKind::NearGoal),
+            ) else {
+                continue;
+            };
+            fitted += 1;
+            assert_eq!(open.goals, near.goals, "seed {seed}");
+            let (gx, gy) = near.goals[0];
+            let s = near.start;
+            let d = (gx - s.x_m).hypot(gy - s.y_m);
+            assert!(GOAL_START_M.contains(&d), "seed {seed}: {d} m");
+            let off = normalize_angle((gy - s.y_m).atan2(gx - s.x_m) - s.yaw_rad).abs();
+            assert!(
+                off >= 0.9 - 1e-9,
+                "seed {seed}: goal {off} rad off the heading"
+            );
+            let way = near.goal_distance[0].at(s.x_m, s.y_m);
+            assert!(
+                way <= GOAL_START_DETOUR * d + 1e-9,
+                "seed {seed}: way {way} m for {d} m"
+            );
+            assert!(loaded
+                .prepared
+                .planning
+                .check_endpoint(planning::Endpoint::Start, s)
+                .is_ok());
+            assert!(loaded
+                .world
+                .disc_overlap(s.x_m, s.y_m, SimConfig::default().base.radius_m, None, true)
+                .is_none());
+        }
+        assert!(fitted >= 20, "{fitted} of 24 seeds fitted");
+    }
 }
