@@ -464,6 +464,32 @@ fn encounters_come_only_of_the_kinds_asked_for() {
     }
 }
 
+/// The episode ids `index.json` lists under `key` (`{probability, episodes}`).
+fn listed_episodes(index: &serde_json::Value, key: &str) -> Vec<u32> {
+    index[key]["episodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e.as_u64().unwrap() as u32)
+        .collect()
+}
+
+/// Each sample's episode id, and the stored episodes in order.
+fn stored_episodes(fields: &BTreeMap<String, Vec<u8>>) -> (Vec<u32>, Vec<u32>) {
+    let episodes = u32s(&fields["episode"]);
+    let mut distinct = episodes.clone();
+    distinct.dedup();
+    (episodes, distinct)
+}
+
+/// How many of `distinct` have a sample `i` (of `episodes`) for which `sample(i)` holds.
+fn episodes_with(episodes: &[u32], distinct: &[u32], sample: impl Fn(usize) -> bool) -> usize {
+    distinct
+        .iter()
+        .filter(|e| (0..episodes.len()).any(|i| episodes[i] == **e && sample(i)))
+        .count()
+}
+
 /// `wall_starts`: every episode starts facing its nearest wall 0.5–1.1 m away, and the
 /// expert's first labels turn on the spot; the index lists the episodes, the option is part of
 /// the dataset id, and a probability outside [0, 1] is refused.
@@ -478,16 +504,9 @@ fn wall_starts_face_a_wall_and_the_expert_turns_on_the_spot() {
     let summary = record(&o, out.path(), &|_| {}).unwrap();
     let (index, fields) = read_all(out.path());
     assert_eq!(index["wall_starts"]["probability"], 1.0);
-    let listed: Vec<u32> = index["wall_starts"]["episodes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|e| e.as_u64().unwrap() as u32)
-        .collect();
+    let listed = listed_episodes(&index, "wall_starts");
     assert_eq!(listed, summary.wall_starts);
-    let episodes = u32s(&fields["episode"]);
-    let mut distinct = episodes.clone();
-    distinct.dedup();
+    let (episodes, distinct) = stored_episodes(&fields);
     assert!(distinct.len() >= 3, "{distinct:?}");
     assert_eq!(listed, distinct);
 
@@ -519,17 +538,9 @@ fn wall_starts_face_a_wall_and_the_expert_turns_on_the_spot() {
     // The expert turns on the spot before it drives off: in the first second of most
     // episodes a label turns hard at walking pace or less.
     let t = f32s(&fields["t_s"]);
-    let turning = distinct
-        .iter()
-        .filter(|e| {
-            (0..episodes.len()).any(|i| {
-                episodes[i] == **e
-                    && t[i] <= 1.0
-                    && label[2 * i].abs() < 0.3
-                    && label[2 * i + 1].abs() > 0.3
-            })
-        })
-        .count();
+    let turning = episodes_with(&episodes, &distinct, |i| {
+        t[i] <= 1.0 && label[2 * i].abs() < 0.3 && label[2 * i + 1].abs() > 0.3
+    });
     assert!(
         2 * turning > distinct.len(),
         "{turning} of {}",
@@ -567,42 +578,24 @@ fn goal_starts_begin_beside_the_first_goal_and_the_expert_turns_to_it() {
     let (index, fields) = read_all(out.path());
     assert_eq!(index["goal_starts"]["probability"], 1.0);
     assert!(index.get("wall_starts").is_none());
-    let listed: Vec<u32> = index["goal_starts"]["episodes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|e| e.as_u64().unwrap() as u32)
-        .collect();
+    let listed = listed_episodes(&index, "goal_starts");
     assert_eq!(listed, summary.goal_starts);
-    let episodes = u32s(&fields["episode"]);
-    let mut distinct = episodes.clone();
-    distinct.dedup();
+    let (episodes, distinct) = stored_episodes(&fields);
     assert!(distinct.len() >= 3, "{distinct:?}");
     assert_eq!(listed, distinct);
     let (label, dlm, t) = (f32s(&fields["label"]), &fields["dlm"], f32s(&fields["t_s"]));
     // The goal is 0.9 rad or more off the heading and at most 1.5 m away: the DLM of an
     // episode's first second is a turn (0 left, 1 right), and in its first 2 s the expert
     // turns hard (|ω| > 0.3 of the limit) at under half speed.
-    let first_turns = distinct
-        .iter()
-        .filter(|e| (0..episodes.len()).any(|i| episodes[i] == **e && t[i] <= 1.0 && dlm[i] <= 1))
-        .count();
+    let first_turns = episodes_with(&episodes, &distinct, |i| t[i] <= 1.0 && dlm[i] <= 1);
     assert!(
         2 * first_turns > distinct.len(),
         "{first_turns} of {}",
         distinct.len()
     );
-    let turning = distinct
-        .iter()
-        .filter(|e| {
-            (0..episodes.len()).any(|i| {
-                episodes[i] == **e
-                    && t[i] <= 2.0
-                    && label[2 * i].abs() < 0.5
-                    && label[2 * i + 1].abs() > 0.3
-            })
-        })
-        .count();
+    let turning = episodes_with(&episodes, &distinct, |i| {
+        t[i] <= 2.0 && label[2 * i].abs() < 0.5 && label[2 * i + 1].abs() > 0.3
+    });
     assert!(
         2 * turning > distinct.len(),
         "{turning} of {}",

@@ -233,33 +233,15 @@ impl RecordOptions {
         if self.samples == 0 {
             return Err(invalid("samples", "0".into(), "need at least one"));
         }
-        if !(0.0..=1.0).contains(&self.noise) {
-            return Err(invalid(
-                "noise",
-                self.noise.to_string(),
-                "must be in [0, 1]",
-            ));
-        }
-        if !(0.0..=1.0).contains(&self.encounters) {
-            return Err(invalid(
-                "encounters",
-                self.encounters.to_string(),
-                "must be in [0, 1]",
-            ));
-        }
-        if !(0.0..=1.0).contains(&self.wall_starts) {
-            return Err(invalid(
-                "wall_starts",
-                self.wall_starts.to_string(),
-                "must be in [0, 1]",
-            ));
-        }
-        if !(0.0..=1.0).contains(&self.goal_starts) {
-            return Err(invalid(
-                "goal_starts",
-                self.goal_starts.to_string(),
-                "must be in [0, 1]",
-            ));
+        for (field, p) in [
+            ("noise", self.noise),
+            ("encounters", self.encounters),
+            ("wall_starts", self.wall_starts),
+            ("goal_starts", self.goal_starts),
+        ] {
+            if !(0.0..=1.0).contains(&p) {
+                return Err(invalid(field, p.to_string(), "must be in [0, 1]"));
+            }
         }
         let kinds = encounter::Encounter::names(&self.encounter_kinds);
         let distinct: std::collections::BTreeSet<_> = kinds.iter().collect();
@@ -898,17 +880,13 @@ pub fn record(
         "kinds": encounter::Encounter::names(&options.encounter_kinds),
         "episodes": encounters,
     });
-    if options.wall_starts > 0.0 {
-        header["wall_starts"] = serde_json::json!({
-            "probability": options.wall_starts,
-            "episodes": wall_starts,
-        });
-    }
-    if options.goal_starts > 0.0 {
-        header["goal_starts"] = serde_json::json!({
-            "probability": options.goal_starts,
-            "episodes": goal_starts,
-        });
+    for (key, p, listed) in [
+        ("wall_starts", options.wall_starts, &wall_starts),
+        ("goal_starts", options.goal_starts, &goal_starts),
+    ] {
+        if p > 0.0 {
+            header[key] = serde_json::json!({ "probability": p, "episodes": listed });
+        }
     }
     let shards = writer.finish(&header)?;
     Ok(Summary {
