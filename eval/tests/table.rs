@@ -83,6 +83,25 @@ fn one_task_two_methods_writes_runs_table_and_figures() {
     assert!(rows
         .iter()
         .all(|r| r["runs"] == 1 && r["scenario"] == "task_a"));
+    // Places where interventions gathered: none for the expert, and for the window only places
+    // of at least two of its own interventions.
+    for row in rows {
+        let places = row["intervention_places"].as_array().expect("a list");
+        let listed: u64 = places
+            .iter()
+            .map(|p| p["interventions"].as_u64().unwrap())
+            .inspect(|&n| assert!(n >= 2, "{row}"))
+            .sum();
+        let total = runs
+            .iter()
+            .filter(|r| r["method"] == row["method"])
+            .map(|r| r["interventions"].as_u64().unwrap())
+            .sum::<u64>();
+        assert!(listed <= total, "{row}");
+        if row["method"] == "expert" {
+            assert!(places.is_empty(), "{row}");
+        }
+    }
     assert!(table["wall_s"].as_f64().unwrap() > 0.0);
     assert!(table["simulated_s"].as_f64().unwrap() > 60.0);
 

@@ -10,6 +10,7 @@ pub mod audit;
 pub mod compare;
 pub mod judge;
 pub mod log;
+pub mod places;
 pub mod report;
 pub mod run;
 

@@ -7,6 +7,7 @@ use protocol::ControllerKind;
 use serde::{Deserialize, Serialize};
 
 use super::audit::IntentionAudit;
+use super::places::{self, Place};
 use super::run::{Prepared, RunResult, RunTrace};
 use super::TableError;
 use crate::figure::{self, GridRow, Trace};
@@ -110,6 +111,10 @@ pub struct Row {
     /// The intention audit summed over the runs that have one.
     #[serde(default)]
     pub intention_audit: Option<IntentionAudit>,
+    /// Where interventions gathered over the seeds ([`super::places`]); empty in tables made
+    /// before 2026-11-30.
+    #[serde(default)]
+    pub intervention_places: Vec<Place>,
 }
 
 /// `table.json`: the rows and how they were made.
@@ -192,6 +197,7 @@ pub fn rows(runs: &[RunResult]) -> Vec<Row> {
                 intention_audit: IntentionAudit::sum(
                     group.iter().filter_map(|r| r.intention_audit.as_ref()),
                 ),
+                intervention_places: places::places(&group),
                 scenario,
             }
         })
@@ -248,6 +254,9 @@ pub fn markdown(table: &Table) -> String {
     if table.rows.iter().any(|r| r.intention_audit.is_some()) {
         out.push_str(&audit_markdown(&table.rows));
     }
+    if table.rows.iter().any(|r| !r.intervention_places.is_empty()) {
+        out.push_str(&places_markdown(&table.rows));
+    }
     out.push_str(&format!(
         "\n{} runs, {:.0} simulated s in {:.0} s wall clock on {} jobs: real-time factor {:.1}.\n",
         table.rows.iter().map(|r| r.runs).sum::<usize>(),
@@ -293,6 +302,37 @@ fn audit_markdown(rows: &[Row]) -> String {
             a.mean_error_when_differs_m,
             a.mean_error_when_agrees_m,
         ));
+    }
+    out
+}
+
+/// Where the interventions gathered (`eval::table::places`).
+fn places_markdown(rows: &[Row]) -> String {
+    let mut out = format!(
+        "\nWhere the interventions were: places where at least {} gathered over the seeds (the \
+         true positions where the robot was picked up, less than {:.1} m apart or chained so; \
+         centre: their mean, extent: the farthest from it), at most {} per scenario × method, \
+         the most first.\n\n\
+         | scenario | method | centre (x, y) (m) | extent (m) | interventions | runs | causes |\n\
+         |---|---|---|---|---|---|---|\n",
+        places::MIN_INTERVENTIONS,
+        places::PLACE_RADIUS_M,
+        places::MAX_PLACES,
+    );
+    for r in rows {
+        for p in &r.intervention_places {
+            out.push_str(&format!(
+                "| {} | {} | ({:.1}, {:.1}) | {:.1} | {} | {} | {} |\n",
+                r.scenario,
+                r.method,
+                p.x_m,
+                p.y_m,
+                p.extent_m,
+                p.interventions,
+                p.runs,
+                p.causes_text(),
+            ));
+        }
     }
     out
 }

@@ -1,0 +1,242 @@
+//! Where a table's interventions happened: the places where the human stepped in more than
+//! once over a scenario's seeds. A round's analysis starts from such a list (a maze's wall end
+//! the robot clips, a goal it circles); before it, each round grouped `runs.json` by hand.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use super::run::{InterventionEvent, RunResult};
+
+/// Interventions closer than this are at one place (m): about the robot's length plus the
+/// judge's carry, so one stall or one wall end is one place.
+pub const PLACE_RADIUS_M: f64 = 1.0;
+/// A place is listed from this many interventions on.
+pub const MIN_INTERVENTIONS: u32 = 2;
+/// At most this many places per scenario × method, the most interventions first.
+pub const MAX_PLACES: usize = 5;
+
+/// One place where interventions gathered.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Place {
+    /// Mean of the true positions where the robot was picked up (m).
+    pub x_m: f64,
+    pub y_m: f64,
+    /// The farthest of them from that mean (m).
+    pub extent_m: f64,
+    pub interventions: u32,
+    /// Runs (seeds) with at least one intervention here.
+    pub runs: u32,
+    /// Interventions by cause (`no progress`, `collision: wall`, ...).
+    pub causes: BTreeMap<String, u32>,
+}
+
+impl Place {
+    /// `no progress 7, collision: wall 2`: the causes, most first.
+    #[must_use]
+    pub fn causes_text(&self) -> String {
+        let mut causes: Vec<(&String, &u32)> = self.causes.iter().collect();
+        causes.sort_by(|a, b| b.1.cmp(a.1).then_with(|| a.0.cmp(b.0)));
+        causes
+            .iter()
+            .map(|(cause, n)| format!("{cause} {n}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+}
+
+/// The places of one scenario × method's runs: interventions less than [`PLACE_RADIUS_M`]
+/// apart are one place, and so are chains of them (single linkage: a robot circling a goal
+/// leaves a ring of pick-ups wider than the radius, one place all the same). The grouping does
+/// not depend on the order of `runs`. Then the places with at least [`MIN_INTERVENTIONS`], at
+/// most [`MAX_PLACES`], the most first.
+#[must_use]
+pub fn places(runs: &[&RunResult]) -> Vec<Place> {
+    let mut events: Vec<(u64, &InterventionEvent)> = runs
+        .iter()
+        .flat_map(|r| r.intervention_log.iter().map(move |e| (r.seed, e)))
+        .collect();
+    events.sort_by(|a, b| a.0.cmp(&b.0).then_with(|| a.1.t_s.total_cmp(&b.1.t_s)));
+    // Union-find over the events; the root is the smallest index of a place.
+    let mut parent: Vec<usize> = (0..events.len()).collect();
+    fn root(parent: &mut [usize], mut i: usize) -> usize {
+        while parent[i] != i {
+            parent[i] = parent[parent[i]];
+            i = parent[i];
+        }
+        i
+    }
+    for i in 0..events.len() {
+        for j in i + 1..events.len() {
+            let (a, b) = (events[i].1, events[j].1);
+            if (a.x_m - b.x_m).hypot(a.y_m - b.y_m) < PLACE_RADIUS_M {
+                let (ri, rj) = (root(&mut parent, i), root(&mut parent, j));
+                parent[ri.max(rj)] = ri.min(rj);
+            }
+        }
+    }
+    let mut members: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
+    for i in 0..events.len() {
+        members.entry(root(&mut parent, i)).or_default().push(i);
+    }
+    let mut places: Vec<Place> = members
+        .into_values()
+        .filter(|m| m.len() >= MIN_INTERVENTIONS as usize)
+        .map(|m| {
+            let n = m.len() as f64;
+            let x_m = m.iter().map(|&i| events[i].1.x_m).sum::<f64>() / n;
+            let y_m = m.iter().map(|&i| events[i].1.y_m).sum::<f64>() / n;
+            let mut seeds: Vec<u64> = m.iter().map(|&i| events[i].0).collect();
+            seeds.sort_unstable();
+            seeds.dedup();
+            let mut causes = BTreeMap::new();
+            for &i in &m {
+                *causes.entry(events[i].1.cause.clone()).or_default() += 1;
+            }
+            Place {
+                x_m,
+                y_m,
+                extent_m: m
+                    .iter()
+                    .map(|&i| (events[i].1.x_m - x_m).hypot(events[i].1.y_m - y_m))
+                    .fold(0.0, f64::max),
+                interventions: u32::try_from(m.len()).unwrap_or(u32::MAX),
+                runs: u32::try_from(seeds.len()).unwrap_or(u32::MAX),
+                causes,
+            }
+        })
+        .collect();
+    places.sort_by(|a, b| {
+        b.interventions
+            .cmp(&a.interventions)
+            .then_with(|| b.runs.cmp(&a.runs))
+            .then_with(|| a.x_m.total_cmp(&b.x_m))
+            .then_with(|| a.y_m.total_cmp(&b.y_m))
+    });
+    places.truncate(MAX_PLACES);
+    places
+}
+
+#[cfg(test)]
+mod tests {
+    use protocol::ControllerKind;
+
+    use super::*;
+    use crate::table::judge::Collisions;
+
+    fn run(seed: u64, log: &[(f64, f64, &str)]) -> RunResult {
+        RunResult {
+            scenario: "task_d".to_string(),
+            role: "evaluation".to_string(),
+            method: ControllerKind::Dlm,
+            seed,
+            success: true,
+            failure: None,
+            interventions: u32::try_from(log.len()).unwrap(),
+            intervention_log: log
+                .iter()
+                .enumerate()
+                .map(|(i, &(x_m, y_m, cause))| InterventionEvent {
+                    t_s: 10.0 * f64::from(u32::try_from(i).unwrap()),
+                    x_m,
+                    y_m,
+                    cause: cause.to_string(),
+                })
+                .collect(),
+            collisions: Collisions::default(),
+            time_s: 200.0,
+            smoothness: Some(2.0),
+            path_length_m: 100.0,
+            min_person_distance_m: None,
+            min_glass_distance_m: None,
+            goals_reached: 4,
+            goals_total: 4,
+            mean_position_error_m: 0.05,
+            max_position_error_m: 0.2,
+            mean_heading_error_deg: 1.0,
+            max_heading_error_deg: 5.0,
+            collision_monitor_share: None,
+            recovery_share: None,
+            recoveries: None,
+            intention_audit: None,
+            wall_s: 1.0,
+        }
+    }
+
+    #[test]
+    fn interventions_gather_by_place_across_seeds_and_lone_ones_are_left_out() {
+        // Task D of DLM-Net r5 alone in miniature: circling the first goal (4, 20) in three
+        // seeds, a wall end clipped twice in one, and one stall elsewhere.
+        let runs = [
+            run(
+                0,
+                &[
+                    (4.3, 19.6, "no progress"),
+                    (4.8, 20.4, "no progress"),
+                    (20.6, 12.8, "collision: wall"),
+                ],
+            ),
+            run(1, &[(3.7, 20.2, "no progress"), (12.0, 6.0, "no progress")]),
+            run(
+                2,
+                &[
+                    (20.9, 13.1, "collision: wall"),
+                    (4.1, 19.9, "collision: furniture"),
+                ],
+            ),
+        ];
+        let refs: Vec<&RunResult> = runs.iter().collect();
+        let found = places(&refs);
+        assert_eq!(found.len(), 2, "{found:?}");
+        let goal = &found[0];
+        assert_eq!((goal.interventions, goal.runs), (4, 3));
+        assert!((goal.x_m - 4.225).abs() < 1e-9 && (goal.y_m - 20.025).abs() < 1e-9);
+        assert_eq!(goal.causes_text(), "no progress 3, collision: furniture 1");
+        let wall = &found[1];
+        assert_eq!((wall.interventions, wall.runs), (2, 2));
+        assert_eq!(wall.causes_text(), "collision: wall 2");
+        // (12, 6) happened once: not a place.
+        assert!(found.iter().all(|p| (p.x_m - 12.0).abs() > 1.0));
+
+        // The order of the runs does not matter.
+        let reversed: Vec<&RunResult> = runs.iter().rev().collect();
+        assert_eq!(places(&reversed), found);
+    }
+
+    #[test]
+    fn a_ring_round_a_goal_is_one_place() {
+        // Circling a goal it drove past, the robot is picked up all round it, 2 m across.
+        let ring: Vec<(f64, f64, &str)> = (0..8u32)
+            .map(|k| {
+                let a = f64::from(k) * std::f64::consts::FRAC_PI_4;
+                (12.0 + a.cos(), 6.0 + a.sin(), "no progress")
+            })
+            .collect();
+        let found = places(&[&run(0, &ring[..4]), &run(1, &ring[4..])]);
+        assert_eq!(found.len(), 1, "{found:?}");
+        let p = &found[0];
+        assert_eq!((p.interventions, p.runs), (8, 2));
+        assert!(
+            (p.x_m - 12.0).abs() < 1e-9 && (p.y_m - 6.0).abs() < 1e-9,
+            "{p:?}"
+        );
+        assert!((p.extent_m - 1.0).abs() < 1e-9, "{p:?}");
+    }
+
+    #[test]
+    fn at_most_five_places_the_most_first() {
+        let log: Vec<(f64, f64, &str)> = (0..7u32)
+            .flat_map(|k| {
+                let x_m = 5.0 * f64::from(k);
+                // Place k gets k + 2 interventions.
+                std::iter::repeat_n((x_m, 1.0, "no progress"), usize::try_from(k).unwrap() + 2)
+            })
+            .collect();
+        let found = places(&[&run(3, &log)]);
+        let counts: Vec<u32> = found.iter().map(|p| p.interventions).collect();
+        assert_eq!(counts, vec![8, 7, 6, 5, 4]);
+        assert!(found.iter().all(|p| p.runs == 1));
+        assert!(places(&[&run(0, &[])]).is_empty());
+    }
+}
