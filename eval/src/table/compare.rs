@@ -13,6 +13,7 @@ use protocol::ControllerKind;
 use serde::{Deserialize, Serialize};
 
 use super::judge::Collisions;
+use super::places;
 use super::report::Stat;
 use super::run::RunResult;
 
@@ -68,6 +69,19 @@ pub struct ScenarioPair {
     pub other_time_s: Option<f64>,
 }
 
+/// A place where either side's interventions gathered ([`super::places::gather`] over both
+/// sides' pick-ups), with each side's count.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlaceChange {
+    pub scenario: String,
+    pub x_m: f64,
+    pub y_m: f64,
+    pub extent_m: f64,
+    pub base_interventions: u32,
+    pub other_interventions: u32,
+}
+
 /// The comparison: `other` against `base`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -83,6 +97,54 @@ pub struct Comparison {
     pub same: usize,
     /// Runs of either side left out because the other side has no run of that scenario and seed.
     pub unpaired: usize,
+    /// Per scenario, the places with at least [`places::MIN_INTERVENTIONS`] of both sides
+    /// together, at most [`places::MAX_PLACES`], the largest change first.
+    #[serde(default)]
+    pub places: Vec<PlaceChange>,
+}
+
+/// The places of one scenario's pairs, the largest change first.
+fn place_changes(scenario: &str, runs: &[(&RunResult, &RunResult)]) -> Vec<PlaceChange> {
+    let base: Vec<&RunResult> = runs.iter().map(|(x, _)| *x).collect();
+    let other: Vec<&RunResult> = runs.iter().map(|(_, y)| *y).collect();
+    let (base, other) = (
+        places::events_in_order(&base),
+        places::events_in_order(&other),
+    );
+    let points_m: Vec<(f64, f64)> = base
+        .iter()
+        .chain(&other)
+        .map(|(_, e)| (e.x_m, e.y_m))
+        .collect();
+    let mut changes: Vec<PlaceChange> = places::gather(&points_m)
+        .into_iter()
+        .filter(|m| m.len() >= places::MIN_INTERVENTIONS as usize)
+        .map(|m| {
+            let ((x_m, y_m), extent_m) = places::centre_and_extent(&points_m, &m);
+            let from_base = m.iter().filter(|&&i| i < base.len()).count();
+            PlaceChange {
+                scenario: scenario.to_string(),
+                x_m,
+                y_m,
+                extent_m,
+                base_interventions: u32::try_from(from_base).unwrap_or(u32::MAX),
+                other_interventions: u32::try_from(m.len() - from_base).unwrap_or(u32::MAX),
+            }
+        })
+        .collect();
+    let change = |p: &PlaceChange| p.other_interventions.abs_diff(p.base_interventions);
+    changes.sort_by(|a, b| {
+        change(b)
+            .cmp(&change(a))
+            .then_with(|| {
+                (b.base_interventions + b.other_interventions)
+                    .cmp(&(a.base_interventions + a.other_interventions))
+            })
+            .then_with(|| a.x_m.total_cmp(&b.x_m))
+            .then_with(|| a.y_m.total_cmp(&b.y_m))
+    });
+    changes.truncate(places::MAX_PLACES);
+    changes
 }
 
 type Key = (String, u64);
@@ -193,6 +255,10 @@ pub fn compare(
     for (x, y) in pb.iter().zip(&po) {
         scenarios.entry(&x.scenario).or_default().push((x, y));
     }
+    let places = scenarios
+        .iter()
+        .flat_map(|(name, runs)| place_changes(name, runs))
+        .collect();
     Ok(Comparison {
         base: side_of(bm, &pb),
         other: side_of(om, &po),
@@ -214,6 +280,7 @@ pub fn compare(
         worse: diffs.iter().filter(|v| **v > 0.0).count(),
         same: diffs.iter().filter(|v| **v == 0.0).count(),
         unpaired,
+        places,
     })
 }
 
@@ -271,12 +338,29 @@ pub fn markdown(c: &Comparison, base_name: &str, other_name: &str) -> String {
         s.push_str(&format!("; {} runs without a partner left out", c.unpaired));
     }
     s.push('\n');
+    if !c.places.is_empty() {
+        s.push_str(&format!(
+            "\nWhere the interventions were (both tables' pick-ups gathered as in `eval table`'s \
+             places; at least {} together, at most {} per scenario, the largest change first):\n\n\
+             | scenario | centre (x, y) (m) | extent (m) | {base_name} | {other_name} |\n\
+             |---|---|---|---|---|\n",
+            places::MIN_INTERVENTIONS,
+            places::MAX_PLACES,
+        ));
+        for p in &c.places {
+            s.push_str(&format!(
+                "| {} | ({:.1}, {:.1}) | {:.1} | {} | {} |\n",
+                p.scenario, p.x_m, p.y_m, p.extent_m, p.base_interventions, p.other_interventions,
+            ));
+        }
+    }
     s
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::table::run::InterventionEvent;
 
     fn run(scenario: &str, seed: u64, method: ControllerKind, interventions: u32) -> RunResult {
         RunResult {
@@ -342,6 +426,46 @@ mod tests {
         let md = markdown(&c, "r6", "e05");
         assert!(md.contains("e05 − r6: -0.50 ± 0.34"), "{md}");
         assert!(md.contains("3 runs without a partner"), "{md}");
+    }
+
+    #[test]
+    fn places_count_each_side_and_the_largest_change_comes_first() {
+        let dlm = ControllerKind::Dlm;
+        let with_log = |seed: u64, picks: &[(f64, f64)]| {
+            let mut r = run("task_d", seed, dlm, u32::try_from(picks.len()).unwrap());
+            r.intervention_log = picks
+                .iter()
+                .enumerate()
+                .map(|(i, &(x_m, y_m))| InterventionEvent {
+                    t_s: f64::from(u32::try_from(i).unwrap()),
+                    x_m,
+                    y_m,
+                    cause: "no progress".to_string(),
+                })
+                .collect();
+            r
+        };
+        // Base circles the goal (12, 6) four times and stalls once at (4, 20); other circles
+        // it once and stalls at (4, 20) three times and once alone at (30, 4).
+        let base = vec![
+            with_log(0, &[(11.2, 6.1), (12.6, 6.8), (4.1, 20.0)]),
+            with_log(1, &[(12.4, 5.3), (11.9, 6.5)]),
+        ];
+        let other = vec![
+            with_log(0, &[(4.0, 20.2), (3.8, 19.9)]),
+            with_log(1, &[(12.1, 6.2), (4.3, 20.1), (30.0, 4.0)]),
+        ];
+        let c = compare(&base, None, &other, None).expect("comparable");
+        let got: Vec<(u32, u32)> = c
+            .places
+            .iter()
+            .map(|p| (p.base_interventions, p.other_interventions))
+            .collect();
+        assert_eq!(got, vec![(4, 1), (1, 3)], "{:?}", c.places);
+        assert!((c.places[0].x_m - 12.04).abs() < 1e-9, "{:?}", c.places[0]);
+        let md = markdown(&c, "r5", "dm");
+        assert!(md.contains("| task_d | (12.0, 6.2) |"), "{md}");
+        assert!(md.contains("| 4 | 1 |") && md.contains("| 1 | 3 |"), "{md}");
     }
 
     #[test]

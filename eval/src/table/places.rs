@@ -46,20 +46,13 @@ impl Place {
     }
 }
 
-/// The places of one scenario × method's runs: interventions less than [`PLACE_RADIUS_M`]
-/// apart are one place, and so are chains of them (single linkage: a robot circling a goal
-/// leaves a ring of pick-ups wider than the radius, one place all the same). The grouping does
-/// not depend on the order of `runs`. Then the places with at least [`MIN_INTERVENTIONS`], at
-/// most [`MAX_PLACES`], the most first.
+/// Groups points (m) into places: points less than [`PLACE_RADIUS_M`] apart are at one place,
+/// and so are chains of them (single linkage: a robot circling a goal leaves a ring of pick-ups
+/// wider than the radius, one place all the same). Each place lists its points' indices in
+/// order; the places come in the order of their first point.
 #[must_use]
-pub fn places(runs: &[&RunResult]) -> Vec<Place> {
-    let mut events: Vec<(u64, &InterventionEvent)> = runs
-        .iter()
-        .flat_map(|r| r.intervention_log.iter().map(move |e| (r.seed, e)))
-        .collect();
-    events.sort_by(|a, b| a.0.cmp(&b.0).then_with(|| a.1.t_s.total_cmp(&b.1.t_s)));
-    // Union-find over the events; the root is the smallest index of a place.
-    let mut parent: Vec<usize> = (0..events.len()).collect();
+pub fn gather(points_m: &[(f64, f64)]) -> Vec<Vec<usize>> {
+    // Union-find; the root of a place is its smallest index.
     fn root(parent: &mut [usize], mut i: usize) -> usize {
         while parent[i] != i {
             parent[i] = parent[parent[i]];
@@ -67,26 +60,59 @@ pub fn places(runs: &[&RunResult]) -> Vec<Place> {
         }
         i
     }
-    for i in 0..events.len() {
-        for j in i + 1..events.len() {
-            let (a, b) = (events[i].1, events[j].1);
-            if (a.x_m - b.x_m).hypot(a.y_m - b.y_m) < PLACE_RADIUS_M {
+    let mut parent: Vec<usize> = (0..points_m.len()).collect();
+    for (i, a) in points_m.iter().enumerate() {
+        for (j, b) in points_m.iter().enumerate().skip(i + 1) {
+            if (a.0 - b.0).hypot(a.1 - b.1) < PLACE_RADIUS_M {
                 let (ri, rj) = (root(&mut parent, i), root(&mut parent, j));
                 parent[ri.max(rj)] = ri.min(rj);
             }
         }
     }
     let mut members: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
-    for i in 0..events.len() {
+    for i in 0..points_m.len() {
         members.entry(root(&mut parent, i)).or_default().push(i);
     }
-    let mut places: Vec<Place> = members
-        .into_values()
+    members.into_values().collect()
+}
+
+/// The mean of some of `points_m` and the farthest of them from it.
+#[must_use]
+pub fn centre_and_extent(points_m: &[(f64, f64)], members: &[usize]) -> ((f64, f64), f64) {
+    #[allow(clippy::cast_precision_loss)]
+    let n = members.len().max(1) as f64;
+    let x_m = members.iter().map(|&i| points_m[i].0).sum::<f64>() / n;
+    let y_m = members.iter().map(|&i| points_m[i].1).sum::<f64>() / n;
+    let extent_m = members
+        .iter()
+        .map(|&i| (points_m[i].0 - x_m).hypot(points_m[i].1 - y_m))
+        .fold(0.0, f64::max);
+    ((x_m, y_m), extent_m)
+}
+
+/// The interventions of some runs in seed and time order, so that what is made of them does
+/// not depend on the order of the runs.
+#[must_use]
+pub fn events_in_order<'a>(runs: &[&'a RunResult]) -> Vec<(u64, &'a InterventionEvent)> {
+    let mut events: Vec<(u64, &InterventionEvent)> = runs
+        .iter()
+        .flat_map(|r| r.intervention_log.iter().map(move |e| (r.seed, e)))
+        .collect();
+    events.sort_by(|a, b| a.0.cmp(&b.0).then_with(|| a.1.t_s.total_cmp(&b.1.t_s)));
+    events
+}
+
+/// The places of one scenario × method's runs ([`gather`]) with at least
+/// [`MIN_INTERVENTIONS`], at most [`MAX_PLACES`], the most first.
+#[must_use]
+pub fn places(runs: &[&RunResult]) -> Vec<Place> {
+    let events = events_in_order(runs);
+    let points_m: Vec<(f64, f64)> = events.iter().map(|(_, e)| (e.x_m, e.y_m)).collect();
+    let mut places: Vec<Place> = gather(&points_m)
+        .into_iter()
         .filter(|m| m.len() >= MIN_INTERVENTIONS as usize)
         .map(|m| {
-            let n = m.len() as f64;
-            let x_m = m.iter().map(|&i| events[i].1.x_m).sum::<f64>() / n;
-            let y_m = m.iter().map(|&i| events[i].1.y_m).sum::<f64>() / n;
+            let ((x_m, y_m), extent_m) = centre_and_extent(&points_m, &m);
             let mut seeds: Vec<u64> = m.iter().map(|&i| events[i].0).collect();
             seeds.sort_unstable();
             seeds.dedup();
@@ -97,10 +123,7 @@ pub fn places(runs: &[&RunResult]) -> Vec<Place> {
             Place {
                 x_m,
                 y_m,
-                extent_m: m
-                    .iter()
-                    .map(|&i| (events[i].1.x_m - x_m).hypot(events[i].1.y_m - y_m))
-                    .fold(0.0, f64::max),
+                extent_m,
                 interventions: u32::try_from(m.len()).unwrap_or(u32::MAX),
                 runs: u32::try_from(seeds.len()).unwrap_or(u32::MAX),
                 causes,
