@@ -8,8 +8,8 @@ use serde::{Deserialize, Serialize};
 
 use super::run::{InterventionEvent, RunResult};
 
-/// Interventions closer than this are at one place (m): about the robot's length plus the
-/// judge's carry, so one stall or one wall end is one place.
+/// Interventions closer than this are at one place (m): two robot diameters, so that the
+/// pick-ups of one stall or one wall end fall together and the next doorway's do not.
 pub const PLACE_RADIUS_M: f64 = 1.0;
 /// A place is listed from this many interventions on.
 pub const MIN_INTERVENTIONS: u32 = 2;
