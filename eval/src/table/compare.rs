@@ -360,39 +360,10 @@ pub fn markdown(c: &Comparison, base_name: &str, other_name: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::table::run::InterventionEvent;
+    use crate::table::run::test_run_with_log;
 
     fn run(scenario: &str, seed: u64, method: ControllerKind, interventions: u32) -> RunResult {
-        RunResult {
-            scenario: scenario.to_string(),
-            role: "evaluation".to_string(),
-            method,
-            seed,
-            success: interventions < 30,
-            failure: None,
-            interventions,
-            intervention_log: Vec::new(),
-            collisions: Collisions {
-                glass: u32::from(interventions > 2),
-                ..Collisions::default()
-            },
-            time_s: 100.0 + f64::from(interventions),
-            smoothness: Some(1.5),
-            path_length_m: 50.0,
-            min_person_distance_m: None,
-            min_glass_distance_m: None,
-            goals_reached: 4,
-            goals_total: 4,
-            mean_position_error_m: 0.02,
-            max_position_error_m: 0.1,
-            mean_heading_error_deg: 1.0,
-            max_heading_error_deg: 3.0,
-            collision_monitor_share: None,
-            recovery_share: None,
-            recoveries: None,
-            intention_audit: None,
-            wall_s: 1.0,
-        }
+        crate::table::run::test_run(scenario, seed, method, interventions)
     }
 
     #[test]
@@ -432,18 +403,9 @@ mod tests {
     fn places_count_each_side_and_the_largest_change_comes_first() {
         let dlm = ControllerKind::Dlm;
         let with_log = |seed: u64, picks: &[(f64, f64)]| {
-            let mut r = run("task_d", seed, dlm, u32::try_from(picks.len()).unwrap());
-            r.intervention_log = picks
-                .iter()
-                .enumerate()
-                .map(|(i, &(x_m, y_m))| InterventionEvent {
-                    t_s: f64::from(u32::try_from(i).unwrap()),
-                    x_m,
-                    y_m,
-                    cause: "no progress".to_string(),
-                })
-                .collect();
-            r
+            let picks: Vec<(f64, f64, &str)> =
+                picks.iter().map(|&(x, y)| (x, y, "no progress")).collect();
+            test_run_with_log("task_d", seed, dlm, &picks)
         };
         // Base circles the goal (12, 6) four times and stalls once at (4, 20); other circles
         // it once and stalls at (4, 20) three times and once alone at (30, 4).

@@ -146,45 +146,10 @@ mod tests {
     use protocol::ControllerKind;
 
     use super::*;
-    use crate::table::judge::Collisions;
+    use crate::table::run::test_run_with_log;
 
     fn run(seed: u64, log: &[(f64, f64, &str)]) -> RunResult {
-        RunResult {
-            scenario: "task_d".to_string(),
-            role: "evaluation".to_string(),
-            method: ControllerKind::Dlm,
-            seed,
-            success: true,
-            failure: None,
-            interventions: u32::try_from(log.len()).unwrap(),
-            intervention_log: log
-                .iter()
-                .enumerate()
-                .map(|(i, &(x_m, y_m, cause))| InterventionEvent {
-                    t_s: 10.0 * f64::from(u32::try_from(i).unwrap()),
-                    x_m,
-                    y_m,
-                    cause: cause.to_string(),
-                })
-                .collect(),
-            collisions: Collisions::default(),
-            time_s: 200.0,
-            smoothness: Some(2.0),
-            path_length_m: 100.0,
-            min_person_distance_m: None,
-            min_glass_distance_m: None,
-            goals_reached: 4,
-            goals_total: 4,
-            mean_position_error_m: 0.05,
-            max_position_error_m: 0.2,
-            mean_heading_error_deg: 1.0,
-            max_heading_error_deg: 5.0,
-            collision_monitor_share: None,
-            recovery_share: None,
-            recoveries: None,
-            intention_audit: None,
-            wall_s: 1.0,
-        }
+        test_run_with_log("task_d", seed, ControllerKind::Dlm, log)
     }
 
     #[test]

@@ -764,3 +764,71 @@ fn segments_jerk(segments: &[Vec<TrajectorySample>]) -> Option<f64> {
     #[allow(clippy::cast_precision_loss)]
     (n > 0).then(|| sum / n as f64)
 }
+
+/// A run with plain figures, for the unit tests of what is made of runs (`report`, `compare`,
+/// `places`): it succeeds below 30 interventions and touches glass once above 2.
+#[cfg(test)]
+pub(crate) fn test_run(
+    scenario: &str,
+    seed: u64,
+    method: ControllerKind,
+    interventions: u32,
+) -> RunResult {
+    RunResult {
+        scenario: scenario.to_string(),
+        role: "evaluation".to_string(),
+        method,
+        seed,
+        success: interventions < 30,
+        failure: None,
+        interventions,
+        intervention_log: Vec::new(),
+        collisions: super::judge::Collisions {
+            glass: u32::from(interventions > 2),
+            ..super::judge::Collisions::default()
+        },
+        time_s: 100.0 + f64::from(interventions),
+        smoothness: Some(1.5),
+        path_length_m: 50.0,
+        min_person_distance_m: None,
+        min_glass_distance_m: None,
+        goals_reached: 4,
+        goals_total: 4,
+        mean_position_error_m: 0.02,
+        max_position_error_m: 0.1,
+        mean_heading_error_deg: 1.0,
+        max_heading_error_deg: 3.0,
+        collision_monitor_share: None,
+        recovery_share: None,
+        recoveries: None,
+        intention_audit: None,
+        wall_s: 1.0,
+    }
+}
+
+/// [`test_run`] with these pick-ups `(x_m, y_m, cause)`, 10 s apart, as its interventions.
+#[cfg(test)]
+pub(crate) fn test_run_with_log(
+    scenario: &str,
+    seed: u64,
+    method: ControllerKind,
+    picks: &[(f64, f64, &str)],
+) -> RunResult {
+    let mut run = test_run(
+        scenario,
+        seed,
+        method,
+        u32::try_from(picks.len()).unwrap_or(u32::MAX),
+    );
+    run.intervention_log = picks
+        .iter()
+        .zip(0u32..)
+        .map(|(&(x_m, y_m, cause), i)| InterventionEvent {
+            t_s: 10.0 * f64::from(i),
+            x_m,
+            y_m,
+            cause: cause.to_string(),
+        })
+        .collect();
+    run
+}
