@@ -6,7 +6,7 @@
 # DLM-Net driven on other DLM parameters than it was trained on (export --drive-dlm-params); a
 # newer closed-loop record put into a shipped card (training/recard.py).
 # Installs PyTorch and the training dependencies into .venv first (scripts/setup.sh made it;
-# about 5 GB, most of it the CUDA libraries PyPI's wheel carries). Not part of the README's
+# about 4.6 GB, most of it the CUDA libraries PyPI's wheel carries). Not part of the README's
 # test command: CI runs it after the Rust tests.
 #
 #   bash scripts/training-smoke.sh [SECONDS_PER_KIND]     # default 10
@@ -18,11 +18,27 @@ if [ ! -x "$PY" ]; then
   echo "error: $PY missing: run scripts/setup.sh first" >&2
   exit 1
 fi
-# The versions these tests last passed with (training/pyproject.toml gives the ranges).
+# The versions these tests last passed with (training/requirements-smoke.txt, every dependency
+# pinned; training/pyproject.toml gives the ranges).
 if ! "$PY" -c 'import torch, onnx, matplotlib, tqdm, PIL' 2>/dev/null; then
-  # No pip cache: the wheels would stay on the disk beside the 5 GB they install.
-  "$PY" -m pip install --quiet --disable-pip-version-check --no-cache-dir \
-    "torch==2.15.0" "onnx==1.23.2" "matplotlib==3.11.2" "tqdm==4.70.1" "pillow==13.0.0"
+  # No pip cache, and the large wheels one at a time (--no-deps, since the file lists every
+  # dependency): the disk then holds what is installed plus one wheel, not all 3 GB of wheels
+  # beside the 4.6 GB they install.
+  pip_install=("$PY" -m pip install --quiet --disable-pip-version-check --no-cache-dir --no-deps)
+  mapfile -t reqs < <(grep -v '^\s*\(#\|$\)' training/requirements-smoke.txt)
+  small=()
+  for req in "${reqs[@]}"; do
+    case "$req" in
+      nvidia-* | cuda-bindings* | torch==*) ;;
+      *) small+=("$req") ;;
+    esac
+  done
+  "${pip_install[@]}" "${small[@]}"
+  for req in "${reqs[@]}"; do
+    case "$req" in
+      nvidia-* | cuda-bindings* | torch==*) "${pip_install[@]}" "$req" ;;
+    esac
+  done
 fi
 "$PY" training/tests/test_smoke.py --seconds "$secs"
 "$PY" training/tests/test_activations.py
