@@ -16,7 +16,7 @@
 //! `<models>` is [`RobotsSpec::models_dir`] or else looked up with
 //! [`protocol::data_dirs::find_models_dir`]; both are checked before anything starts.
 
-use std::io::{BufRead, BufReader, Read};
+use std::io::{BufRead, BufReader, Read, Write as _};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::mpsc;
@@ -136,7 +136,8 @@ impl Process {
             let label = name.to_string();
             std::thread::spawn(move || {
                 for line in BufReader::new(stream).lines().map_while(Result::ok) {
-                    eprintln!("[{label}] {line}");
+                    // Not `eprintln!`: a stderr that is gone must not end the draining.
+                    let _ = writeln!(std::io::stderr(), "[{label}] {line}");
                     // Nobody collecting any more is fine: keep draining so the child never
                     // blocks on a full pipe.
                     let _ = tx.send(line);

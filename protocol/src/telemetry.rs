@@ -41,6 +41,11 @@ pub fn init_tracing(default_filter: &str) -> Result<(), TracingInitError> {
     tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        // A write to a stderr that is gone (the pipe of a supervisor that died) is dropped.
+        // The subscriber's default reports it with `eprintln!` to that same stderr, which
+        // panics; the next log line in the unwinding panics again and aborts the process,
+        // before it can finish its run log (tests/tests/demo.rs, the demo killed outright).
+        .log_internal_errors(false)
         .try_init()
         .map_err(|e| TracingInitError::Install(e.to_string()))?;
     if let Some((value, reason)) = ignored {

@@ -161,12 +161,16 @@ fn a_secured_demo_drives_over_mutual_tls_with_access_control() {
 /// A demo killed outright (SIGKILL: no chance to stop its children) does not leave its
 /// simulator and agents running: they see their stdin close and stop by themselves. They used
 /// to run on, retrying the dead service's Zenoh endpoint, ready to join whatever listened on
-/// that port next with a second `robot_1`.
+/// that port next with a second `robot_1`. They stop the orderly way, finishing their run logs:
+/// the pipes of their stdout and stderr died with the demo, and their first log line after it
+/// used to panic in the log subscriber (its fallback `eprintln!` to the same dead stderr) and
+/// abort, leaving every log `.partial` (seen in CI's core dumps, 2026-12-01).
 #[test]
 fn a_demo_killed_outright_leaves_no_simulator_or_agent_behind() {
     let bins = bin_dir().unwrap();
     let data = tempfile::tempdir().unwrap();
     let scenario = repo_root().join("sim/scenarios/task_a.yaml");
+    let logs = data.path().join("logs");
     let mut demo = Service::start_demo(
         &bins,
         &data.path().join("data"),
@@ -174,7 +178,7 @@ fn a_demo_killed_outright_leaves_no_simulator_or_agent_behind() {
         2,
         TOKEN,
         None,
-        &[],
+        &["--record-dir", logs.to_str().unwrap()],
     )
     .unwrap();
     demo.wait_for("/api/v1/robots", Duration::from_secs(90), |v| {
@@ -215,4 +219,20 @@ fn a_demo_killed_outright_leaves_no_simulator_or_agent_behind() {
         "still running 20 s after the demo was killed: {:?} of {children:?}",
         running()
     );
+    let files: Vec<String> = std::fs::read_dir(&logs)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    let finished = |name: &str| {
+        fleet_log::RunLog::open(&logs.join(name))
+            .unwrap_or_else(|e| panic!("{name}: {e}; the logs: {files:?}"))
+    };
+    assert!(!finished("sim.mcap").ground_truth().is_empty());
+    for name in ["robot_1.mcap", "robot_2.mcap"] {
+        let counts = finished(name).counts();
+        assert!(
+            counts.get(&fleet_log::Topic::Odom).copied().unwrap_or(0) > 0,
+            "{name}: {counts:?}"
+        );
+    }
 }
