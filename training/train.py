@@ -93,11 +93,17 @@ def parse_args(argv=None) -> argparse.Namespace:
                         "loop, where validation loss does not choose (a GPU lease brings them all back)")
     p.add_argument("--init", help="start from this checkpoint's weights (same kind and architecture), e.g. "
                    "the previous DAgger round's checkpoint_best.pt; optimiser and schedule start afresh")
+    p.add_argument("--freeze-bn", action="store_true",
+                   help="keep every batch norm's running statistics as --init left them (the layers in eval mode "
+                        "while training; their scale and shift still learn): a fine-tune then cannot re-estimate "
+                        "them on its new data")
     p.add_argument("--init-camera", help="start the camera backbone only from this checkpoint's camera backbone "
                    "(any kind, the same --backbone), e.g. LPE-Net's for a new DLM-Net; the rest starts fresh")
     args = p.parse_args(argv)
     if args.init and args.init_camera:
         p.error("--init and --init-camera exclude each other (--init already loads the camera)")
+    if args.freeze_bn and not (args.init or args.init_camera):
+        p.error("--freeze-bn needs --init or --init-camera (freshly built batch norms have no statistics to keep)")
     if args.backbone == "resnet50" and args.max_onnx_mb < 200:
         p.error("a ResNet-50 model is ~95 MB in ONNX (two for --lpe-branch separate); pass --max-onnx-mb 200 or more")
     return args
@@ -282,6 +288,8 @@ def main(argv=None) -> int:
     r["epochs"] = epochs
     r["val_fraction"] = args.val_fraction
     r["seed"] = args.seed
+    if args.freeze_bn:
+        r["freeze_bn"] = True
 
     config = {"kind": args.kind, "backbone": args.backbone, "lpe_branch": args.lpe_branch}
     # Channels-last weights and images: oneDNN's fast convolution layout (the ONNX export is
@@ -316,6 +324,9 @@ def main(argv=None) -> int:
     if args.init:
         deviations.append(f"warm-started from the weights of {args.init} (an earlier round, trained on "
                           f"dataset {r['init_datasets']}), as a DAgger round retrains the learner")
+    if args.freeze_bn:
+        deviations.append("batch norms' running statistics kept at the warm start's while fine-tuning "
+                          "(eval mode; their scale and shift still trained)")
     if args.init_camera:
         deviations.append(f"camera backbone warm-started from the camera backbone of {args.init_camera} "
                           f"(trained on dataset {r['init_datasets']}); intention, heads and the rest from scratch")
@@ -356,6 +367,8 @@ def main(argv=None) -> int:
     epoch = 0
     while not stop and (epochs is None or epoch < epochs):
         net.train()
+        if args.freeze_bn:
+            model.freeze_batch_norm_statistics(net)
         batches = data.epoch_batches(w, train_idx, r["samples_per_epoch"], r["batch"], args.seed, epoch)
         src = data.Batches(pool, batches, args.kind, train=True, seed=args.seed, epoch=epoch,
                            augment_images=r["augment"], randomize_p=r["randomize_intention"])

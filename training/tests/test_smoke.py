@@ -193,6 +193,24 @@ def check_rebuild(data_dir: Path, work: Path) -> None:
     first, last = (torch.load(work / "lpe-warm" / n, map_location="cpu", weights_only=False) for n in kept)
     assert (first["epoch"], last["epoch"]) == (0, 1), (first["epoch"], last["epoch"])
     assert any(not torch.equal(first["state_dict"][k], last["state_dict"][k]) for k in first["state_dict"])
+    # --freeze-bn: the batch norms' running statistics stay the warm start's, the weights learn;
+    # without it (lpe-warm) a fine-tune re-estimates them on its own data.
+    run([sys.executable, "-m", "training.train", "--kind", "lpe", "--backbone", "small-spatial", "--data", str(data_dir),
+         "--out", str(work / "lpe-frozen"), "--epochs", "1", "--samples-per-epoch", "128", "--threads", "1",
+         "--init", str(rebuilt), "--freeze-bn"])
+    init = torch.load(rebuilt, map_location="cpu", weights_only=False)["state_dict"]
+    stats = [k for k in init if k.endswith(("running_mean", "running_var"))]
+    assert len(stats) > 10, stats
+    frozen = torch.load(work / "lpe-frozen" / "checkpoint_last.pt", map_location="cpu", weights_only=False)["state_dict"]
+    assert all(torch.equal(frozen[k], init[k]) for k in stats), "--freeze-bn changed running statistics"
+    assert any(not torch.equal(frozen[k], init[k]) for k in init if k not in stats), "--freeze-bn trained nothing"
+    assert any(not torch.equal(first["state_dict"][k], init[k]) for k in stats), "an unfrozen fine-tune kept them"
+    frozen_card = json.loads((work / "lpe-frozen" / "card.json").read_text())
+    assert json.loads(frozen_card["recipe"]).get("freeze_bn") is True, frozen_card["recipe"]
+    assert "running statistics kept" in frozen_card["deviations"], frozen_card["deviations"]
+    p = subprocess.run([sys.executable, "-m", "training.train", "--kind", "lpe", "--data", str(data_dir),
+                        "--out", str(work / "lpe-cold"), "--freeze-bn"], cwd=ROOT, capture_output=True, text=True)
+    assert p.returncode != 0 and "--freeze-bn needs --init" in p.stderr, p.stderr[-2000:]
     p = subprocess.run([sys.executable, "-m", "training.from_onnx", "--model", str(work / "lpe-spatial" / "lpe.onnx"),
                         "--backbone", "small", "--calibrate", str(data_dir), "--out", str(work / "wrong.pt")],
                        cwd=ROOT, capture_output=True, text=True)
