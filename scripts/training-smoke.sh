@@ -25,19 +25,17 @@ if ! "$PY" -c 'import torch, onnx, matplotlib, tqdm, PIL' 2>/dev/null; then
   # dependency): the disk then holds what is installed plus one wheel, not all 3 GB of wheels
   # beside the 4.6 GB they install.
   pip_install=("$PY" -m pip install --quiet --disable-pip-version-check --no-cache-dir --no-deps)
-  mapfile -t reqs < <(grep -v '^\s*\(#\|$\)' training/requirements-smoke.txt)
-  small=()
-  for req in "${reqs[@]}"; do
+  small=() large=()
+  while read -r req; do
     case "$req" in
-      nvidia-* | cuda-bindings* | torch==*) ;;
+      '' | '#'*) ;;
+      nvidia-* | cuda-bindings* | torch==*) large+=("$req") ;;
       *) small+=("$req") ;;
     esac
-  done
+  done < training/requirements-smoke.txt
   "${pip_install[@]}" "${small[@]}"
-  for req in "${reqs[@]}"; do
-    case "$req" in
-      nvidia-* | cuda-bindings* | torch==*) "${pip_install[@]}" "$req" ;;
-    esac
+  for req in "${large[@]}"; do
+    "${pip_install[@]}" "$req"
   done
 fi
 "$PY" training/tests/test_smoke.py --seconds "$secs"

@@ -247,15 +247,12 @@ def count_parameters(model: nn.Module) -> int:
     return sum(p.numel() for p in model.parameters())
 
 
-def freeze_batch_norm_statistics(net: nn.Module) -> int:
+def freeze_batch_norm_statistics(net: nn.Module) -> None:
     """Puts every batch norm of `net` in eval mode, so that training uses and keeps its running
-    statistics (its scale and shift still get gradients); returns how many. Called after each
+    statistics (its scale and shift still get gradients). Called after each
     `net.train()`, which would switch them back. A fine-tune from a shipped model otherwise
     re-estimates the statistics on its own, narrower data (round 30's suspect for the glass door
     every DLM-Net fine-tune forgot)."""
-    n = 0
     for m in net.modules():
         if isinstance(m, nn.modules.batchnorm._BatchNorm):
             m.eval()
-            n += 1
-    return n
