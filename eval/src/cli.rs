@@ -321,6 +321,11 @@ pub struct RecordArgs {
     /// the tolerance.
     #[arg(long, default_value_t = 0.0)]
     goal_starts: f64,
+    /// Probability that an episode (neither of the above) starts 1–3 m from its first goal
+    /// with a wall between, the way round the wall's end short, facing along it: the hairpin
+    /// round the end of a thin maze wall.
+    #[arg(long, default_value_t = 0.0)]
+    hairpin_starts: f64,
     /// Largest turn-rate offset of a noise pulse in rad/s (the expert's command filter ignores
     /// pushes up to this size, so its labels correct them).
     #[arg(long, default_value_t = 0.4)]
@@ -474,6 +479,7 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
         },
         wall_starts: args.wall_starts,
         goal_starts: args.goal_starts,
+        hairpin_starts: args.hairpin_starts,
         noise_peak_radps: args.noise_peak_radps,
         seed: args.seed,
         jobs: args.jobs.unwrap_or_else(|| {
@@ -537,6 +543,12 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
         println!(
             "  {} episodes started next to their first goal",
             summary.goal_starts.len()
+        );
+    }
+    if !summary.hairpin_starts.is_empty() {
+        println!(
+            "  {} episodes started in a hairpin round a wall's end",
+            summary.hairpin_starts.len()
         );
     }
     Ok(())

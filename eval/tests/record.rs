@@ -617,6 +617,54 @@ fn goal_starts_begin_beside_the_first_goal_and_the_expert_turns_to_it() {
     assert!(err.contains("goal_starts") && err.contains("-0.1"), "{err}");
 }
 
+/// `eval record --hairpin-starts 1` in a training maze: every stored episode starts behind a
+/// thin wall from its first goal facing along the way round the wall's end, so the expert
+/// drives off at once instead of turning on the spot; the index lists the episodes; the option is part of the dataset id and checked, naming the field.
+#[test]
+fn hairpin_starts_drive_round_a_wall_end_to_a_goal_behind_it() {
+    let mut o = options(0.0, 2);
+    o.scenarios = vec![scenario("train_maze_a.yaml")];
+    o.samples = 240;
+    o.episode_s = 6.0;
+    o.hairpin_starts = 1.0;
+    let out = tempfile::tempdir().unwrap();
+    let summary = record(&o, out.path(), &|_| {}).unwrap();
+    let (index, fields) = read_all(out.path());
+    assert_eq!(index["hairpin_starts"]["probability"], 1.0);
+    assert!(index.get("goal_starts").is_none());
+    let listed = listed_episodes(&index, "hairpin_starts");
+    assert_eq!(listed, summary.hairpin_starts);
+    let (episodes, distinct) = stored_episodes(&fields);
+    assert!(distinct.len() >= 3, "{distinct:?}");
+    assert_eq!(listed, distinct);
+    // In a hairpin the way starts along the wall, and the expert drives it at speed: in most
+    // episodes its first 2 s hold a label above a third of the speed limit.
+    let (label, t) = (f32s(&fields["label"]), f32s(&fields["t_s"]));
+    let driving = episodes_with(&episodes, &distinct, |i| t[i] <= 2.0 && label[2 * i] > 0.33);
+    assert!(
+        2 * driving > distinct.len(),
+        "{driving} of {}",
+        distinct.len()
+    );
+
+    let off = RecordOptions {
+        hairpin_starts: 0.0,
+        ..o.clone()
+    };
+    assert_ne!(off.dataset_id().unwrap(), summary.dataset_id);
+    let err = RecordOptions {
+        hairpin_starts: 1.5,
+        ..o
+    }
+    .validate()
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("hairpin_starts") && err.contains("1.5"),
+        "{err}"
+    );
+}
+
 /// `eval record --record-dir`: every stored episode also leaves its run log, named after the
 /// samples' episode number, which replays through the agent's AMCL exactly as it ran; the
 /// dataset is the same as without logs.

@@ -87,6 +87,11 @@ pub struct RecordOptions {
     /// that drove past a goal just outside the tolerance must turn back to it instead of
     /// circling round it.
     pub goal_starts: f64,
+    /// Probability that an episode (neither a wall nor a goal start) starts in a hairpin
+    /// ([`HAIRPIN_START_M`] from its first goal with a wall between, the way round that
+    /// wall's end short), facing along the way: the turn round the end of a thin wall where
+    /// DLM-Net, told only `turn_left`, stalled or touched the end (task E's mazes).
+    pub hairpin_starts: f64,
     /// Largest turn-rate offset of a noise pulse. In a noisy episode the expert's
     /// resynchronisation threshold (`ExpertConfig::motion_resync_radps`: it adopts the
     /// measured motion as its own command state when the two differ by more) is raised above
@@ -140,6 +145,7 @@ impl Default for RecordOptions {
             encounter_kinds: encounter::Encounter::DEFAULT.to_vec(),
             wall_starts: 0.0,
             goal_starts: 0.0,
+            hairpin_starts: 0.0,
             noise_peak_radps: 0.4,
             seed: 0,
             jobs: 1,
@@ -169,6 +175,8 @@ pub struct Summary {
     pub wall_starts: Vec<u32>,
     /// The stored episodes that started near their first goal.
     pub goal_starts: Vec<u32>,
+    /// The stored episodes that started in a hairpin.
+    pub hairpin_starts: Vec<u32>,
     pub shards: usize,
     /// Simulated seconds of all episodes run (including samples cut off at the end).
     pub simulated_s: f64,
@@ -238,6 +246,7 @@ impl RecordOptions {
             ("encounters", self.encounters),
             ("wall_starts", self.wall_starts),
             ("goal_starts", self.goal_starts),
+            ("hairpin_starts", self.hairpin_starts),
         ] {
             if !(0.0..=1.0).contains(&p) {
                 return Err(invalid(field, p.to_string(), "must be in [0, 1]"));
@@ -379,6 +388,9 @@ impl RecordOptions {
         if self.goal_starts > 0.0 {
             h.update(format!("goal_starts {:?}\n", self.goal_starts).as_bytes());
         }
+        if self.hairpin_starts > 0.0 {
+            h.update(format!("hairpin_starts {:?}\n", self.hairpin_starts).as_bytes());
+        }
         if let Some(p) = &self.policy {
             let bytes = std::fs::read(&p.model).map_err(|e| {
                 RecordError::Run(TableError::Setup {
@@ -457,6 +469,21 @@ const GOAL_START_OFF_RAD: std::ops::RangeInclusive<f64> = 0.9..=std::f64::consts
 const GOAL_START_DETOUR: f64 = 1.3;
 /// Candidate places tried round the first goal for a goal start.
 const GOAL_START_TRIES: usize = 64;
+/// A hairpin start: this far from a goal in a straight line, with a wall between, and the
+/// way round along the floor plan at least [`HAIRPIN_MIN_DETOUR`] times the straight line but
+/// at most [`HAIRPIN_MAX_EXTRA_M`] longer than it, so the way turns round a wall's end close
+/// by (task E's thin walls: 0.2 m thick, corridors 2 m wide) rather than the long way round.
+const HAIRPIN_START_M: std::ops::RangeInclusive<f64> = 1.0..=3.0;
+const HAIRPIN_MIN_DETOUR: f64 = 2.0;
+const HAIRPIN_MAX_EXTRA_M: f64 = 7.0;
+/// How far ahead the way's direction is read from the goal's distance field, and over how
+/// many bearings.
+const HAIRPIN_LOOK_M: f64 = 0.4;
+const HAIRPIN_BEARINGS: u32 = 32;
+/// The start faces the way's direction up to this much off.
+const HAIRPIN_YAW_RAD: f64 = 0.3;
+/// Candidate places tried round each goal for a hairpin start.
+const HAIRPIN_TRIES: usize = 256;
 
 /// How an episode starts.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -467,6 +494,9 @@ enum StartKind {
     Wall,
     /// Near the first goal, which lies to the side or behind (`RecordOptions::goal_starts`).
     NearGoal,
+    /// Behind a wall from the first goal, facing along the way round the wall's end
+    /// (`RecordOptions::hairpin_starts`).
+    Hairpin,
 }
 
 /// Where an episode starts and the goals it visits, with their distance fields for the judge.
@@ -495,7 +525,9 @@ fn nearest_wall(walls: &WallGrid, x_m: f64, y_m: f64, max_m: f64) -> Option<(f64
 /// [`WALL_START_M`], turned to face it (up to [`WALL_START_YAW_RAD`] off), so the robot must
 /// turn on the spot before it can drive. With a goal start, the start is then moved next to
 /// the first goal ([`GOAL_START_M`], the goal off its heading by [`GOAL_START_OFF_RAD`]).
-/// `None` when the scenario has no room for them.
+/// A hairpin start is put behind a wall from the first goal that has one close by
+/// ([`hairpin_start`]); the goals before that one are dropped. `None` when the scenario has
+/// no room for them (an episode without a hairpin anywhere is skipped).
 fn plan_episode(loaded: &Loaded, seed: u64, kind: StartKind) -> Option<EpisodePlan> {
     let prepared = &loaded.prepared;
     let radius_m = SimConfig::default().base.radius_m;
@@ -555,15 +587,78 @@ fn plan_episode(loaded: &Loaded, seed: u64, kind: StartKind) -> Option<EpisodePl
     if goals.len() < 2 {
         return None;
     }
-    let start = if kind == StartKind::NearGoal {
-        near_goal_start(loaded, seed, goals[0], &distances[0], &clear)?
-    } else {
-        start
-    };
+    let start =
+        match kind {
+            StartKind::NearGoal => near_goal_start(loaded, seed, goals[0], &distances[0], &clear)?,
+            StartKind::Hairpin => {
+                // The first goal with a hairpin round it; the goals before it are dropped.
+                let (first, start) = goals.iter().zip(&distances).enumerate().find_map(
+                    |(i, (&goal, distance))| {
+                        hairpin_start(loaded, seed ^ i as u64, goal, distance, &clear)
+                            .map(|s| (i, s))
+                    },
+                )?;
+                goals.drain(..first);
+                distances.drain(..first);
+                start
+            }
+            StartKind::Open | StartKind::Wall => start,
+        };
     Some(EpisodePlan {
         start,
         goal_distance: distances,
         goals,
+    })
+}
+
+/// A start [`HAIRPIN_START_M`] from `goal` with a wall between them and the way round it
+/// short (see [`HAIRPIN_MIN_DETOUR`]), facing where the goal's distance field falls fastest
+/// [`HAIRPIN_LOOK_M`] ahead, up to [`HAIRPIN_YAW_RAD`] off; `None` when no try fits.
+fn hairpin_start(
+    loaded: &Loaded,
+    seed: u64,
+    goal: (f64, f64),
+    distance: &GoalDistance,
+    clear: &dyn Fn(&Pose2D, f64, bool) -> bool,
+) -> Option<Pose2D> {
+    let mut rng = ChaCha8Rng::seed_from_u64(mix(seed ^ 0x4A19_9147));
+    (0..HAIRPIN_TRIES).find_map(|_| {
+        let d = rng.gen_range(HAIRPIN_START_M);
+        let around = rng.gen_range(-std::f64::consts::PI..std::f64::consts::PI);
+        let off = rng.gen_range(-HAIRPIN_YAW_RAD..=HAIRPIN_YAW_RAD);
+        let (x_m, y_m) = (goal.0 + d * around.cos(), goal.1 + d * around.sin());
+        let way_m = distance.at(x_m, y_m);
+        if !(way_m.is_finite()
+            && way_m >= HAIRPIN_MIN_DETOUR * d
+            && way_m <= d + HAIRPIN_MAX_EXTRA_M)
+        {
+            return None;
+        }
+        // A wall between: the ray from the start towards the goal hits one before the goal.
+        let towards = around + std::f64::consts::PI;
+        loaded
+            .walls
+            .cast(x_m, y_m, towards.cos(), towards.sin(), d)?;
+        let way_yaw = (0..HAIRPIN_BEARINGS)
+            .map(|i| std::f64::consts::TAU * f64::from(i) / f64::from(HAIRPIN_BEARINGS))
+            .map(|yaw| {
+                let ahead = distance.at(
+                    x_m + HAIRPIN_LOOK_M * yaw.cos(),
+                    y_m + HAIRPIN_LOOK_M * yaw.sin(),
+                );
+                (yaw, ahead)
+            })
+            .filter(|(_, ahead)| ahead.is_finite())
+            .min_by(|a, b| a.1.total_cmp(&b.1))?
+            .0;
+        let p = Pose2D::new(x_m, y_m, normalize_angle(way_yaw + off));
+        (clear(&p, START_CLEARANCE_M, true)
+            && loaded
+                .prepared
+                .planning
+                .check_endpoint(planning::Endpoint::Start, p)
+                .is_ok())
+        .then_some(p)
     })
 }
 
@@ -628,10 +723,13 @@ fn run_episode(
     // Its own draw, so that recordings without goal starts stay as they were.
     let goal_start =
         ChaCha8Rng::seed_from_u64(mix(seed ^ 0x060A_0000)).gen_bool(options.goal_starts);
-    let start_kind = match (wall_start, goal_start) {
-        (true, _) => StartKind::Wall,
-        (false, true) => StartKind::NearGoal,
-        (false, false) => StartKind::Open,
+    let hairpin_start =
+        ChaCha8Rng::seed_from_u64(mix(seed ^ 0x4A19_0000)).gen_bool(options.hairpin_starts);
+    let start_kind = match (wall_start, goal_start, hairpin_start) {
+        (true, _, _) => StartKind::Wall,
+        (false, true, _) => StartKind::NearGoal,
+        (false, false, true) => StartKind::Hairpin,
+        (false, false, false) => StartKind::Open,
     };
     let empty = Episode {
         scenario,
@@ -777,6 +875,7 @@ pub fn record(
     let mut encounters: BTreeMap<&'static str, Vec<u32>> = BTreeMap::new();
     let mut wall_starts: Vec<u32> = Vec::new();
     let mut goal_starts: Vec<u32> = Vec::new();
+    let mut hairpin_starts: Vec<u32> = Vec::new();
     let mut next_episode = 0u64;
     // Episodes that give nothing (no room, blocked start) must not loop for ever.
     let mut empty_in_a_row = 0usize;
@@ -844,6 +943,7 @@ pub fn record(
             match episode.start {
                 StartKind::Wall => wall_starts.push(id),
                 StartKind::NearGoal => goal_starts.push(id),
+                StartKind::Hairpin => hairpin_starts.push(id),
                 StartKind::Open => {}
             }
             for sample in episode.samples {
@@ -883,6 +983,7 @@ pub fn record(
     for (key, p, listed) in [
         ("wall_starts", options.wall_starts, &wall_starts),
         ("goal_starts", options.goal_starts, &goal_starts),
+        ("hairpin_starts", options.hairpin_starts, &hairpin_starts),
     ] {
         if p > 0.0 {
             header[key] = serde_json::json!({ "probability": p, "episodes": listed });
@@ -897,6 +998,7 @@ pub fn record(
         encounters,
         wall_starts,
         goal_starts,
+        hairpin_starts,
         shards,
         simulated_s,
         wall_s: started.elapsed().as_secs_f64(),
@@ -986,5 +1088,50 @@ mod tests {
                 .is_none());
         }
         assert!(fitted >= 20, "{fitted} of 24 seeds fitted");
+    }
+
+    /// A hairpin start lies behind a wall from its first goal, the way round the wall's end
+    /// short, and faces along that way: a step ahead is nearer the goal along the plan.
+    #[test]
+    fn a_hairpin_start_faces_the_way_round_a_wall_between_it_and_its_goal() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../sim/scenarios/train_maze_a.yaml");
+        let loaded = Loaded::new(Prepared::load(&path, &recording_run_options()).unwrap()).unwrap();
+        let mut fitted = 0;
+        for seed in 0..24 {
+            let Some(plan) = plan_episode(&loaded, seed, StartKind::Hairpin) else {
+                continue;
+            };
+            fitted += 1;
+            let (gx, gy) = plan.goals[0];
+            let s = plan.start;
+            let d = (gx - s.x_m).hypot(gy - s.y_m);
+            assert!(HAIRPIN_START_M.contains(&d), "seed {seed}: {d} m");
+            let towards = (gy - s.y_m).atan2(gx - s.x_m);
+            assert!(
+                loaded
+                    .walls
+                    .cast(s.x_m, s.y_m, towards.cos(), towards.sin(), d)
+                    .is_some(),
+                "seed {seed}: no wall between"
+            );
+            let distance = &plan.goal_distance[0];
+            let way = distance.at(s.x_m, s.y_m);
+            assert!(
+                way >= HAIRPIN_MIN_DETOUR * d && way <= d + HAIRPIN_MAX_EXTRA_M,
+                "seed {seed}: way {way} m for {d} m"
+            );
+            let ahead = distance.at(
+                s.x_m + HAIRPIN_LOOK_M * s.yaw_rad.cos(),
+                s.y_m + HAIRPIN_LOOK_M * s.yaw_rad.sin(),
+            );
+            assert!(ahead < way, "seed {seed}: {ahead} m ahead, {way} m here");
+            assert!(loaded
+                .prepared
+                .planning
+                .check_endpoint(planning::Endpoint::Start, s)
+                .is_ok());
+        }
+        // The rest have no wall end near any of their goals and are skipped (15 of 24 fit).
+        assert!(fitted >= 12, "{fitted} of 24 seeds fitted");
     }
 }
