@@ -472,7 +472,7 @@ const GOAL_START_TRIES: usize = 64;
 /// A hairpin start: this far from a goal in a straight line, with a wall between, and the
 /// way round along the floor plan at least [`HAIRPIN_MIN_DETOUR`] times the straight line but
 /// at most [`HAIRPIN_MAX_EXTRA_M`] longer than it, so the way turns round a wall's end close
-/// by (task E's thin walls: 0.2 m thick, corridors 2 m wide) rather than the long way round.
+/// by (task E's maze: walls 0.6 m thick between 2 m passages) rather than the long way round.
 const HAIRPIN_START_M: std::ops::RangeInclusive<f64> = 1.0..=3.0;
 const HAIRPIN_MIN_DETOUR: f64 = 2.0;
 const HAIRPIN_MAX_EXTRA_M: f64 = 7.0;
