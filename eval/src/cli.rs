@@ -533,23 +533,14 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
     for (kind, episodes) in &summary.encounters {
         println!("  {} episodes with a scripted {kind}", episodes.len());
     }
-    if !summary.wall_starts.is_empty() {
-        println!(
-            "  {} episodes started facing a wall",
-            summary.wall_starts.len()
-        );
-    }
-    if !summary.goal_starts.is_empty() {
-        println!(
-            "  {} episodes started next to their first goal",
-            summary.goal_starts.len()
-        );
-    }
-    if !summary.hairpin_starts.is_empty() {
-        println!(
-            "  {} episodes started in a hairpin round a wall's end",
-            summary.hairpin_starts.len()
-        );
+    for (episodes, how) in [
+        (&summary.wall_starts, "facing a wall"),
+        (&summary.goal_starts, "next to their first goal"),
+        (&summary.hairpin_starts, "in a hairpin round a wall's end"),
+    ] {
+        if !episodes.is_empty() {
+            println!("  {} episodes started {how}", episodes.len());
+        }
     }
     Ok(())
 }

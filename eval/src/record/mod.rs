@@ -611,6 +611,33 @@ fn plan_episode(loaded: &Loaded, seed: u64, kind: StartKind) -> Option<EpisodePl
     })
 }
 
+/// A point `d` in `range` from `goal` at a random bearing `around` (drawn in that order):
+/// `(d, around, x_m, y_m)`.
+fn round_goal(
+    rng: &mut ChaCha8Rng,
+    goal: (f64, f64),
+    range: std::ops::RangeInclusive<f64>,
+) -> (f64, f64, f64, f64) {
+    let d = rng.gen_range(range);
+    let around = rng.gen_range(-std::f64::consts::PI..std::f64::consts::PI);
+    (
+        d,
+        around,
+        goal.0 + d * around.cos(),
+        goal.1 + d * around.sin(),
+    )
+}
+
+/// Whether `p` is free of the world's things and a start the planner takes.
+fn fits_as_start(loaded: &Loaded, clear: &dyn Fn(&Pose2D, f64, bool) -> bool, p: &Pose2D) -> bool {
+    clear(p, START_CLEARANCE_M, true)
+        && loaded
+            .prepared
+            .planning
+            .check_endpoint(planning::Endpoint::Start, *p)
+            .is_ok()
+}
+
 /// A start [`HAIRPIN_START_M`] from `goal` with a wall between them and the way round it
 /// short (see [`HAIRPIN_MIN_DETOUR`]), facing where the goal's distance field falls fastest
 /// [`HAIRPIN_LOOK_M`] ahead, up to [`HAIRPIN_YAW_RAD`] off; `None` when no try fits.
@@ -623,10 +650,8 @@ fn hairpin_start(
 ) -> Option<Pose2D> {
     let mut rng = ChaCha8Rng::seed_from_u64(mix(seed ^ 0x4A19_9147));
     (0..HAIRPIN_TRIES).find_map(|_| {
-        let d = rng.gen_range(HAIRPIN_START_M);
-        let around = rng.gen_range(-std::f64::consts::PI..std::f64::consts::PI);
+        let (d, around, x_m, y_m) = round_goal(&mut rng, goal, HAIRPIN_START_M);
         let off = rng.gen_range(-HAIRPIN_YAW_RAD..=HAIRPIN_YAW_RAD);
-        let (x_m, y_m) = (goal.0 + d * around.cos(), goal.1 + d * around.sin());
         let way_m = distance.at(x_m, y_m);
         if !(way_m.is_finite()
             && way_m >= HAIRPIN_MIN_DETOUR * d
@@ -652,13 +677,7 @@ fn hairpin_start(
             .min_by(|a, b| a.1.total_cmp(&b.1))?
             .0;
         let p = Pose2D::new(x_m, y_m, normalize_angle(way_yaw + off));
-        (clear(&p, START_CLEARANCE_M, true)
-            && loaded
-                .prepared
-                .planning
-                .check_endpoint(planning::Endpoint::Start, p)
-                .is_ok())
-        .then_some(p)
+        fits_as_start(loaded, clear, &p).then_some(p)
     })
 }
 
@@ -673,10 +692,8 @@ fn near_goal_start(
 ) -> Option<Pose2D> {
     let mut rng = ChaCha8Rng::seed_from_u64(mix(seed ^ 0x060A_1557));
     (0..GOAL_START_TRIES).find_map(|_| {
-        let d = rng.gen_range(GOAL_START_M);
-        let around = rng.gen_range(-std::f64::consts::PI..std::f64::consts::PI);
+        let (d, around, x_m, y_m) = round_goal(&mut rng, goal, GOAL_START_M);
         let off = rng.gen_range(GOAL_START_OFF_RAD) * if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
-        let (x_m, y_m) = (goal.0 + d * around.cos(), goal.1 + d * around.sin());
         // Facing the goal is `around + π`; turned `off` from that.
         let p = Pose2D::new(
             x_m,
@@ -684,14 +701,7 @@ fn near_goal_start(
             normalize_angle(around + std::f64::consts::PI + off),
         );
         let way_m = distance.at(x_m, y_m);
-        (clear(&p, START_CLEARANCE_M, true)
-            && loaded
-                .prepared
-                .planning
-                .check_endpoint(planning::Endpoint::Start, p)
-                .is_ok()
-            && way_m.is_finite()
-            && way_m <= GOAL_START_DETOUR * d)
+        (fits_as_start(loaded, clear, &p) && way_m.is_finite() && way_m <= GOAL_START_DETOUR * d)
             .then_some(p)
     })
 }
