@@ -26,6 +26,7 @@ use robot_agent::collision_monitor::{self, CollisionMonitorConfig};
 use robot_agent::controllers::{
     ControlInput, Controller, DynamicWindow, DynamicWindowConfig, PathTracker, PathTrackerConfig,
 };
+use robot_agent::movers::Track;
 use robot_agent::recovery::{self, Recovery, RecoveryConfig};
 use robot_agent::Limits;
 use test_support::fixtures;
@@ -235,6 +236,31 @@ fn bench_step(c: &mut Criterion) {
             let ahead = recovery::ahead_m(black_box(&near_scan));
             black_box(rec.drive(0.1, near, goal, None, f64::INFINITY, ahead))
         });
+    });
+    // The obstacle layer's most (96 points, a ring 1-3 m round the robot) through the beside
+    // trigger's sector, and eight walking tracks for the held trigger: the agent's worst case.
+    let points: Vec<[f64; 2]> = (0..96)
+        .map(|k| {
+            let (s, c) = (f64::from(k) * 0.3).sin_cos();
+            let r_m = 1.0 + f64::from(k % 20) * 0.1;
+            [near.x_m + r_m * c, near.y_m + r_m * s]
+        })
+        .collect();
+    group.bench_function("beside_m_96_points", |b| {
+        b.iter(|| black_box(recovery::beside_m(black_box(&points), near)));
+    });
+    let tracks: Vec<Track> = (0..8)
+        .map(|k| Track {
+            x_m: near.x_m + f64::from(k) * 0.5,
+            y_m: near.y_m + 1.0,
+            vx_mps: 0.6,
+            vy_mps: 0.1,
+            age_s: 2.0,
+            points_m: vec![[near.x_m + f64::from(k) * 0.5, near.y_m + 1.0]],
+        })
+        .collect();
+    group.bench_function("walker_m_8_tracks", |b| {
+        b.iter(|| black_box(recovery::walker_m(black_box(&tracks), near)));
     });
     group.finish();
 }

@@ -759,17 +759,19 @@ impl Supervisor {
             self.recovery.idle(dt);
             Mode::Primary
         } else if self.fallback.is_some() {
-            let unmapped_m = self
-                .unmapped_seen
-                .iter()
-                .map(|&[x, y]| (x - pose.x_m).hypot(y - pose.y_m))
-                .fold(f64::INFINITY, f64::min);
+            let unmapped_m = crate::recovery::beside_m(&self.unmapped_seen, pose);
             let ahead_m = self
                 .scan
                 .as_ref()
                 .map_or(f64::INFINITY, crate::recovery::ahead_m);
+            // The tracks are this cycle's, the verdict the last command's: someone walking
+            // near now was near then.
+            let monitored = self.last_verdict.map(|verdict| crate::recovery::Monitored {
+                verdict,
+                walker_m: crate::recovery::walker_m(self.movers.tracks(), pose),
+            });
             self.recovery
-                .drive(dt, pose, goal, self.last_verdict, unmapped_m, ahead_m)
+                .drive(dt, pose, goal, monitored, unmapped_m, ahead_m)
         } else {
             Mode::Primary
         };

@@ -42,7 +42,12 @@
 //! [`RecoveryConfig::beside_m`] of an obstacle the agent's obstacle layer reports
 //! ([`crate::unmapped`]), a controller that keeps the robot within [`STILL_M`] of one spot for
 //! [`RecoveryConfig::beside_stall_s`] is relieved. The layer has no glass in it (the laser sees
-//! through glass), so a network standing before a glass door is still left alone.
+//! through glass), so a network standing before a glass door is still left alone. Only what
+//! stands before the robot counts ([`beside_m`]: within [`BESIDE_HALF_ANGLE_RAD`] of its
+//! heading): a bench flush against the corridor wall beside a shut glass door is not what
+//! stopped the network, and counting it relieved LPE-Net r33 standing 0.25 m before the pane
+//! with the bench 0.61 m to its left; the dynamic window, blind to the pane, drove into it
+//! (`gen_eval_1000033`, 2026-12-02; docs/evaluation.md, round 34).
 //!
 //! A fourth trigger: cornered. DLM-Net, told only `turn_left` or `go_forward`, takes a maze's
 //! hairpin too wide, ends up facing a wall half a metre away and stands there creeping at
@@ -52,7 +57,18 @@
 //! [`RecoveryConfig::cornered_stall_s`] while the laser sees something within
 //! [`RecoveryConfig::cornered_m`] straight ahead ([`ahead_m`]) is relieved. Turning on the spot
 //! is not cornered, and glass does not count: the laser sees through it, so a network standing
-//! before a shut glass door sees the room behind and is still left alone.
+//! before a shut glass door sees the room behind and is still left alone. The laser must have
+//! seen something ahead for the whole of [`RecoveryConfig::cornered_stall_s`], not only now: a
+//! wall stays, a person walking across in front of a robot that already stands before a glass
+//! door does not, and counting the person relieved LPE-Net r33 0.4 m before the pane; the
+//! dynamic window drove into it once the person had gone (`gen_eval_1000045`, 2026-12-02).
+//!
+//! The held trigger does not count while someone walks within [`HELD_WALKER_M`] of the robot
+//! ([`walker_m`]): they walk on, and the monitor holding the robot for them is waiting, not
+//! being stuck. A network crawling to a stop before a glass door, which the monitor stopped
+//! outright while a person passed 0.3 m beside it, was relieved, and the dynamic window drove
+//! into the pane (LPE-Net r33, `gen_eval_1000036`, 2026-12-02). A person standing still counts
+//! as anything else the laser sees.
 //!
 //! Plain data in (cycle length, pose, distance to the goal, what the monitor did to the last
 //! command, how far the nearest reported obstacle is, how far the laser sees ahead), the mode out; the
@@ -63,6 +79,7 @@ use protocol::{normalize_angle, LaserScan, Pose2D};
 use crate::collision_monitor::Verdict;
 use crate::config::ConfigError;
 use crate::controllers::path_tracker::check_positive;
+use crate::movers::Track;
 
 /// The `[safety.recovery]` table.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -84,7 +101,7 @@ pub struct RecoveryConfig {
     /// ... a controller that brings the robot no closer for this long is relieved too.
     pub approach_stall_s: f64,
     /// Within this distance (robot centre to point) of an obstacle the agent reports seeing
-    /// where the floor plan is free ([`crate::unmapped`]) ...
+    /// where the floor plan is free ([`crate::unmapped`]), before the robot ([`beside_m`]) ...
     pub beside_m: f64,
     /// ... a controller that keeps the robot within [`STILL_M`] of one spot for this long is
     /// relieved too.
@@ -127,6 +144,64 @@ pub fn ahead_m(scan: &LaserScan) -> f64 {
         })
         .map(|(_, &r)| f64::from(r))
         .fold(f64::INFINITY, f64::min)
+}
+
+/// Half the width of the sector about the robot's heading in which an obstacle the floor plan
+/// lacks counts for [`RecoveryConfig::beside_stall_s`] ([`beside_m`]). Wide enough that a robot
+/// turning on the spot beside a cabinet sweeps it into view, narrow enough that a bench it
+/// stands abeam of (at 84–95°) is left out.
+pub const BESIDE_HALF_ANGLE_RAD: f64 = 1.0;
+
+/// How far (robot centre to point) the nearest of `points_m` (map frame, as the agent's
+/// obstacle layer reports them) lies within [`BESIDE_HALF_ANGLE_RAD`] of `pose`'s heading
+/// (infinite: none).
+#[must_use]
+pub fn beside_m(points_m: &[[f64; 2]], pose: Pose2D) -> f64 {
+    points_m
+        .iter()
+        .filter_map(|&[x_m, y_m]| {
+            let (dx, dy) = (x_m - pose.x_m, y_m - pose.y_m);
+            let bearing_rad = normalize_angle(dy.atan2(dx) - pose.yaw_rad);
+            (bearing_rad.abs() <= BESIDE_HALF_ANGLE_RAD).then(|| dx.hypot(dy))
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// While someone walks this close (robot centre to their track), a cycle the collision monitor
+/// slows does not count as held.
+pub const HELD_WALKER_M: f64 = 1.5;
+
+/// A track this fast is someone walking, for [`walker_m`]: the speed above which the
+/// collision monitor moves a body's returns on (`collision_monitor::moving_bodies`).
+pub const WALKING_MPS: f64 = 0.2;
+
+/// How far (robot centre to track centre) the nearest settled track walking at
+/// [`WALKING_MPS`] or more is from `pose` (infinite: none).
+#[must_use]
+pub fn walker_m(tracks: &[Track], pose: Pose2D) -> f64 {
+    tracks
+        .iter()
+        .filter(|t| t.settled() && t.vx_mps.hypot(t.vy_mps) >= WALKING_MPS)
+        .map(|t| (t.x_m - pose.x_m).hypot(t.y_m - pose.y_m))
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// What the collision monitor did to the previous cycle's command, and how far the nearest
+/// person walking was then ([`walker_m`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Monitored {
+    pub verdict: Verdict,
+    pub walker_m: f64,
+}
+
+impl Monitored {
+    /// Whether this cycle counts as held below `held_speed_mps` (see the module docs).
+    #[must_use]
+    pub fn held(&self, held_speed_mps: f64) -> bool {
+        self.verdict.limited()
+            && self.verdict.v_mps.abs() < held_speed_mps
+            && self.walker_m > HELD_WALKER_M
+    }
 }
 
 /// What counts as coming closer to the goal, for [`RecoveryConfig::approach_stall_s`].
@@ -201,6 +276,8 @@ pub struct Recovery {
     still: Option<(Pose2D, f64)>,
     /// The pose the robot has held (within [`STILL_M`] and [`STILL_RAD`]), and since when.
     posed: Option<(Pose2D, f64)>,
+    /// Since when the laser has seen something within `cornered_m` straight ahead.
+    blocked_since_s: Option<f64>,
 }
 
 impl Recovery {
@@ -215,6 +292,7 @@ impl Recovery {
             approach: None,
             still: None,
             posed: None,
+            blocked_since_s: None,
         }
     }
 
@@ -242,20 +320,21 @@ impl Recovery {
         self.approach = None;
         self.still = None;
         self.posed = None;
+        self.blocked_since_s = None;
     }
 
     /// One driving cycle of `dt_s` at `pose`, towards `goal` (the end of the planned path;
-    /// `None`: no path); `monitor` is what the
-    /// collision monitor did to the previous cycle's command (`None`: nothing to check, or it is
-    /// off); `unmapped_m` is how far the nearest obstacle the agent sees where the floor plan
-    /// is free lies from the robot's centre (infinite: none); `ahead_m` how far the laser sees
-    /// straight ahead ([`ahead_m`]; infinite: nothing). Returns who drives this cycle.
+    /// `None`: no path); `monitor` is what the collision monitor did to the previous cycle's
+    /// command and how near someone walked (`None`: nothing to check, or it is off); `unmapped_m` is how far the nearest
+    /// obstacle the agent sees where the floor plan is free lies from the robot's centre, before
+    /// it ([`beside_m`]; infinite: none); `ahead_m` how far the laser sees straight ahead
+    /// ([`ahead_m`]; infinite: nothing). Returns who drives this cycle.
     pub fn drive(
         &mut self,
         dt_s: f64,
         pose: Pose2D,
         goal: Option<Pose2D>,
-        monitor: Option<Verdict>,
+        monitor: Option<Monitored>,
         unmapped_m: f64,
         ahead_m: f64,
     ) -> Mode {
@@ -301,12 +380,15 @@ impl Recovery {
             return Mode::Fallback;
         }
         let posed_s = stood_s(&mut self.posed, pose, now, STILL_RAD);
-        let cornered = ahead_m <= c.cornered_m && posed_s >= c.cornered_stall_s;
+        self.blocked_since_s =
+            (ahead_m <= c.cornered_m).then(|| self.blocked_since_s.unwrap_or(now));
+        let blocked_s = self.blocked_since_s.map_or(0.0, |since_s| now - since_s);
+        let cornered = posed_s.min(blocked_s) >= c.cornered_stall_s;
         if cornered {
             self.take_over(pose, now, "cornered: standing before something ahead");
             return Mode::Fallback;
         }
-        let held = monitor.is_some_and(|m| m.limited() && m.v_mps.abs() < c.held_speed_mps);
+        let held = monitor.is_some_and(|m| m.held(c.held_speed_mps));
         self.held_s = if held {
             self.held_s + dt_s
         } else {
@@ -325,6 +407,7 @@ impl Recovery {
         self.approach = None;
         self.still = None;
         self.posed = None;
+        self.blocked_since_s = None;
     }
 
     fn take_over(&mut self, pose: Pose2D, now: f64, why: &str) {
@@ -367,13 +450,17 @@ mod tests {
         Some(Pose2D::new(m, 0.0, 0.0))
     }
 
-    /// The monitor's verdict on a command it slowed to `v_mps` (or passed, `None`).
-    fn verdict(v_mps: Option<f64>) -> Option<Verdict> {
-        v_mps.map(|v_mps| Verdict {
-            v_mps,
-            omega_radps: 0.0,
-            scale: 0.1,
-            time_to_collision_s: Some(1.2),
+    /// The monitor's verdict on a controller's 0.7 m/s it slowed to `v_mps` (or passed,
+    /// `None`), nobody walking near.
+    fn verdict(v_mps: Option<f64>) -> Option<Monitored> {
+        v_mps.map(|v_mps| Monitored {
+            verdict: Verdict {
+                v_mps,
+                omega_radps: 0.0,
+                scale: v_mps / 0.7,
+                time_to_collision_s: Some(1.2),
+            },
+            walker_m: f64::INFINITY,
         })
     }
 
@@ -617,6 +704,27 @@ mod tests {
     }
 
     #[test]
+    fn beside_counts_what_stands_before_the_robot_not_abeam_or_behind() {
+        // gen_eval_1000033's shut glass door: the robot faces west 0.25 m before the pane, a
+        // bench flush against the corridor wall to its left (the layer's cells along its face).
+        let robot = Pose2D::new(20.52, 11.66, 3.09);
+        let bench: Vec<[f64; 2]> = (0..6)
+            .map(|k| [20.45 + 0.1 * f64::from(k), 11.05])
+            .collect();
+        assert!(beside_m(&bench, robot).is_infinite());
+        // A cabinet 0.5 m ahead and a little to the left counts at its distance.
+        let cabinet = [[20.02, 11.56], [20.02, 11.46]];
+        let all: Vec<[f64; 2]> = bench.iter().chain(&cabinet).copied().collect();
+        let d = beside_m(&all, robot);
+        assert!((d - 0.51).abs() < 0.02, "{d}");
+        // Turned to face the bench, the robot has it before it.
+        let facing = Pose2D::new(20.52, 11.66, -1.57);
+        let d = beside_m(&bench, facing);
+        assert!((d - 0.61).abs() < 0.01, "{d}");
+        assert!(beside_m(&[], robot).is_infinite());
+    }
+
+    #[test]
     fn standing_before_a_wall_for_cornered_stall_s_hands_over_but_not_turning_or_before_glass() {
         // Creeping at 0.02 m/s facing a wall 0.5 m ahead (DLM-Net at task E's hairpins):
         // relieved after cornered_stall_s.
@@ -657,6 +765,73 @@ mod tests {
                 Mode::Primary
             );
         }
+        // A person steps in front of it for a second and a half, and walks on (gen_eval_1000045):
+        // left alone. Had the person stayed, the timer would run from their first step.
+        for k in 0..100 {
+            let ahead_m = if (10..25).contains(&k) { 0.3 } else { 3.0 };
+            assert_eq!(
+                r.drive(DT, here, FAR_M, None, f64::INFINITY, ahead_m),
+                Mode::Primary,
+                "{k}"
+            );
+        }
+        let n = (0..100)
+            .find(|_| r.drive(DT, here, FAR_M, None, f64::INFINITY, 0.3) == Mode::Fallback)
+            .expect("never relieved");
+        assert!((29..=31).contains(&n), "{n}");
+    }
+
+    #[test]
+    fn held_does_not_count_while_someone_walks_near() {
+        let here = Pose2D::new(0.0, 0.0, 0.0);
+        let stopped = |walker_m: f64| {
+            Some(Monitored {
+                verdict: Verdict {
+                    v_mps: 0.0,
+                    omega_radps: 0.0,
+                    scale: 0.0,
+                    time_to_collision_s: Some(0.4),
+                },
+                walker_m,
+            })
+        };
+        // A network crawling to a stop before a glass door, stopped by the monitor while a
+        // person passes 0.3-1.0 m beside it for 2 s (gen_eval_1000036): left alone.
+        let mut r = Recovery::new(RecoveryConfig::default());
+        for k in 0..20 {
+            let walker_m = 0.3 + 0.035 * f64::from(k);
+            assert_eq!(
+                r.drive(DT, here, FAR_M, stopped(walker_m), f64::INFINITY, 3.0),
+                Mode::Primary,
+                "{k}"
+            );
+        }
+        // Once they are farther than HELD_WALKER_M, a hold counts again.
+        let n = (0..100)
+            .find(|_| r.drive(DT, here, FAR_M, stopped(2.0), f64::INFINITY, 3.0) == Mode::Fallback)
+            .expect("never relieved");
+        assert!((9..=11).contains(&n), "{n}");
+    }
+
+    #[test]
+    fn walker_is_the_nearest_settled_track_walking() {
+        let track = |x_m: f64, vx_mps: f64, age_s: f64| Track {
+            x_m,
+            y_m: 0.0,
+            vx_mps,
+            vy_mps: 0.0,
+            age_s,
+            points_m: vec![[x_m, 0.0]],
+        };
+        let robot = Pose2D::new(0.0, 0.0, 0.0);
+        // Standing (a parked robot, a person waiting), new, or walking 2 m off.
+        let tracks = [
+            track(0.5, 0.05, 5.0),
+            track(0.8, 1.0, 0.0),
+            track(2.0, 0.8, 5.0),
+        ];
+        assert!((walker_m(&tracks, robot) - 2.0).abs() < 1e-9);
+        assert!(walker_m(&tracks[..2], robot).is_infinite());
     }
 
     fn scan(ranges_m: Vec<f32>) -> LaserScan {
