@@ -157,12 +157,16 @@ pub const BESIDE_HALF_ANGLE_RAD: f64 = 1.0;
 /// (infinite: none).
 #[must_use]
 pub fn beside_m(points_m: &[[f64; 2]], pose: Pose2D) -> f64 {
+    let (sin, cos) = pose.yaw_rad.sin_cos();
+    // Within the sector: the point's component along the heading is at least cos(half angle)
+    // of its distance (no atan2 per point).
+    let min_cos = BESIDE_HALF_ANGLE_RAD.cos();
     points_m
         .iter()
         .filter_map(|&[x_m, y_m]| {
             let (dx, dy) = (x_m - pose.x_m, y_m - pose.y_m);
-            let bearing_rad = normalize_angle(dy.atan2(dx) - pose.yaw_rad);
-            (bearing_rad.abs() <= BESIDE_HALF_ANGLE_RAD).then(|| dx.hypot(dy))
+            let d_m = dx.hypot(dy);
+            (dx * cos + dy * sin >= min_cos * d_m).then_some(d_m)
         })
         .fold(f64::INFINITY, f64::min)
 }
