@@ -71,7 +71,8 @@
 //! as anything else the laser sees.
 //!
 //! Plain data in (cycle length, pose, distance to the goal, what the monitor did to the last
-//! command, how far the nearest reported obstacle is, how far the laser sees ahead), the mode out; the
+//! command and who walked near, how far the nearest reported obstacle before the robot is, how
+//! far the laser sees ahead), the mode out; the
 //! [`Supervisor`](crate::Supervisor) switches controllers by it.
 
 use protocol::{normalize_angle, LaserScan, Pose2D};
@@ -329,10 +330,11 @@ impl Recovery {
 
     /// One driving cycle of `dt_s` at `pose`, towards `goal` (the end of the planned path;
     /// `None`: no path); `monitor` is what the collision monitor did to the previous cycle's
-    /// command and how near someone walked (`None`: nothing to check, or it is off); `unmapped_m` is how far the nearest
-    /// obstacle the agent sees where the floor plan is free lies from the robot's centre, before
-    /// it ([`beside_m`]; infinite: none); `ahead_m` how far the laser sees straight ahead
-    /// ([`ahead_m`]; infinite: nothing). Returns who drives this cycle.
+    /// command and how near someone walked (`None`: nothing to check, or it is off);
+    /// `unmapped_m` is how far the nearest obstacle the agent sees where the floor plan is free
+    /// lies from the robot's centre, before it ([`beside_m`]; infinite: none); `ahead_m` how far
+    /// the laser sees straight ahead ([`ahead_m`]; infinite: nothing). Returns who drives this
+    /// cycle.
     pub fn drive(
         &mut self,
         dt_s: f64,
