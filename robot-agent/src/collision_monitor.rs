@@ -30,7 +30,7 @@ use crate::config::ConfigError;
 use crate::controllers::dynamic_window::arc_pose;
 use crate::controllers::path_tracker::{check_non_negative, check_positive};
 use crate::controllers::scan_points;
-use crate::movers::Track;
+use crate::movers::{Track, MIN_WALKING_MPS};
 
 /// How much closer than now the disc may come to a point already inside the margin: floating
 /// point rounding, no more.
@@ -132,9 +132,6 @@ pub struct MovingBody {
 
 /// A body's returns reach this much beyond the farthest one tracked this cycle.
 const BODY_SLACK_M: f64 = 0.1;
-/// Slower than this across the heading, a tracked body is taken not to cross (its velocity is
-/// mostly noise).
-const MIN_MOVER_MPS: f64 = 0.2;
 
 /// The settled `tracks` (map frame) that walk across the robot's heading, in the frame of a
 /// scan taken at `map_from_scan`, with their motion across it only.
@@ -153,7 +150,7 @@ pub fn moving_bodies(tracks: &[Track], map_from_scan: Pose2D) -> Vec<MovingBody>
         .filter_map(|t| {
             let (dx, dy) = (t.x_m - map_from_scan.x_m, t.y_m - map_from_scan.y_m);
             let across_mps = -s * t.vx_mps + c * t.vy_mps;
-            (across_mps.abs() >= MIN_MOVER_MPS).then(|| MovingBody {
+            (across_mps.abs() >= MIN_WALKING_MPS).then(|| MovingBody {
                 x_m: c * dx + s * dy,
                 y_m: -s * dx + c * dy,
                 reach_m: t.extent_m() + BODY_SLACK_M,

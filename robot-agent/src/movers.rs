@@ -33,6 +33,9 @@ const VELOCITY_GAIN: f64 = 0.3;
 const YOUNG_VELOCITY_GAIN: f64 = 0.6;
 /// A track younger than this has no velocity to judge by.
 pub const MIN_TRACK_S: f64 = 0.5;
+/// Slower than this, a settled track is taken to stand (its velocity is mostly noise): the
+/// collision monitor's bodies crossing the heading, the recovery's people walking near.
+pub const MIN_WALKING_MPS: f64 = 0.2;
 /// Scans further apart than this start the tracking afresh (what was seen is too old to say
 /// what stands still, and a body has moved too far to match).
 const MAX_GAP_S: f64 = 0.5;

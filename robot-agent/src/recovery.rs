@@ -80,7 +80,7 @@ use protocol::{normalize_angle, LaserScan, Pose2D};
 use crate::collision_monitor::Verdict;
 use crate::config::ConfigError;
 use crate::controllers::path_tracker::check_positive;
-use crate::movers::Track;
+use crate::movers::{Track, MIN_WALKING_MPS};
 
 /// The `[safety.recovery]` table.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -176,17 +176,13 @@ pub fn beside_m(points_m: &[[f64; 2]], pose: Pose2D) -> f64 {
 /// slows does not count as held.
 pub const HELD_WALKER_M: f64 = 1.5;
 
-/// A track this fast is someone walking, for [`walker_m`]: the speed above which the
-/// collision monitor moves a body's returns on (`collision_monitor::moving_bodies`).
-pub const WALKING_MPS: f64 = 0.2;
-
 /// How far (robot centre to track centre) the nearest settled track walking at
-/// [`WALKING_MPS`] or more is from `pose` (infinite: none).
+/// [`MIN_WALKING_MPS`] or more is from `pose` (infinite: none).
 #[must_use]
 pub fn walker_m(tracks: &[Track], pose: Pose2D) -> f64 {
     tracks
         .iter()
-        .filter(|t| t.settled() && t.vx_mps.hypot(t.vy_mps) >= WALKING_MPS)
+        .filter(|t| t.settled() && t.vx_mps.hypot(t.vy_mps) >= MIN_WALKING_MPS)
         .map(|t| (t.x_m - pose.x_m).hypot(t.y_m - pose.y_m))
         .fold(f64::INFINITY, f64::min)
 }
