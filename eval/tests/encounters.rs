@@ -187,7 +187,10 @@ fn every_kind_fits_and_the_expert_handles_it_without_contact() {
                     "the path passes {off_m} m from the opening's middle"
                 );
             }
-            Encounter::PersonAhead | Encounter::PersonOncoming | Encounter::PersonHeadOn => {
+            Encounter::PersonAhead
+            | Encounter::PersonOncoming
+            | Encounter::PersonHeadOn
+            | Encounter::PersonHeadOnNear => {
                 assert_eq!(s.people.len(), base.scenario.people.len() + 1);
                 let person = s.people.last().unwrap();
                 let first = &person.route[0];
@@ -196,7 +199,15 @@ fn every_kind_fits_and_the_expert_handles_it_without_contact() {
                     from_start >= 2.0,
                     "{kind:?} starts {from_start} m from the robot"
                 );
-                if *kind == Encounter::PersonHeadOn {
+                if *kind == Encounter::PersonHeadOnNear {
+                    // Near enough to meet within seconds of the start, not 7-18 m off.
+                    let (_, hi) = encounter::HEAD_ON_NEAR_M;
+                    assert!(
+                        from_start <= hi + 0.2,
+                        "a near head-on person sets off {from_start} m from the robot"
+                    );
+                }
+                if matches!(kind, Encounter::PersonHeadOn | Encounter::PersonHeadOnNear) {
                     // Along the robot's own line, up to its start: they must meet.
                     let path = first_leg(&base, s, &options);
                     for q in &person.route {

@@ -19,6 +19,12 @@
 //!   have left the camera's view beside it. LPE-Net r26 alone drove on too soon and touched the
 //!   person in 6 of 10 runs of task C (docs/evaluation.md, round 26). Not among the kinds a
 //!   recording draws from by default ([`Encounter::DEFAULT`]);
+//! - [`Encounter::PersonHeadOnNear`]: head-on too, but the person sets off only
+//!   [`HEAD_ON_NEAR_M`] ahead, so that the stand-off (the robot stopped, the person walking
+//!   round it and on past it) fills most of a short episode instead of its last seconds.
+//!   Every LPE-Net's person contacts alone on task C over 20 seeds came in that stand-off,
+//!   after 154 head-on episodes that start 7–18 m off (docs/evaluation.md, rounds 36–38).
+//!   Not among the default kinds either;
 //! - [`Encounter::GlassDoor`]: a shut glass door from wall to wall across the path 4–12 m
 //!   ahead, where the passage is at most 3 m wide. The floor plan does not have it; the
 //!   expert stops short of it and waits until the judge's intervention carries the robot
@@ -72,11 +78,12 @@ pub enum Encounter {
     Furniture,
     OpenGlassDoor,
     PersonHeadOn,
+    PersonHeadOnNear,
 }
 
 impl Encounter {
     /// Every kind, as the command line names them.
-    pub const ALL: [Encounter; 7] = [
+    pub const ALL: [Encounter; 8] = [
         Encounter::PersonAhead,
         Encounter::PersonOncoming,
         Encounter::GlassDoor,
@@ -84,11 +91,13 @@ impl Encounter {
         Encounter::Furniture,
         Encounter::OpenGlassDoor,
         Encounter::PersonHeadOn,
+        Encounter::PersonHeadOnNear,
     ];
 
     /// The kinds a recording draws from unless told (`--encounter-kinds`): all but
-    /// [`Encounter::PersonHeadOn`], which came later (last in [`Encounter::ALL`]), so that
-    /// the recordings made before it stay reproducible from their commands.
+    /// [`Encounter::PersonHeadOn`] and [`Encounter::PersonHeadOnNear`], which came later
+    /// (last in [`Encounter::ALL`]), so that the recordings made before them stay
+    /// reproducible from their commands.
     pub const DEFAULT: &'static [Encounter] = Encounter::ALL.split_at(6).0;
 
     #[must_use]
@@ -101,6 +110,7 @@ impl Encounter {
             Encounter::Furniture => "furniture",
             Encounter::OpenGlassDoor => "open_glass_door",
             Encounter::PersonHeadOn => "person_head_on",
+            Encounter::PersonHeadOnNear => "person_head_on_near",
         }
     }
 
@@ -133,6 +143,10 @@ const ROUTE_CLEARANCE_M: f64 = 0.05;
 const ROUTE_STEP_M: f64 = 1.0;
 /// Furthest a head-on person's route lies off the path's centre line, either way.
 const HEAD_ON_OFFSET_M: f64 = 0.15;
+/// Where along the path a [`Encounter::PersonHeadOnNear`] person sets off: near enough that
+/// the robot, starting at rest, meets them within a few seconds, and past the 2.5 m a person
+/// needs to step round a robot that has just stopped.
+pub const HEAD_ON_NEAR_M: (f64, f64) = (3.0, 6.0);
 /// Clearance from the floor plan's walls along the path where a person and the robot can
 /// pass each other (a passage about 1.4 m wide; in narrower ones each would wait for the
 /// other).
@@ -403,18 +417,26 @@ fn place(
             let speed = rng.gen_range(0.25..0.45);
             scenario.people.push(person(&points, speed, rng));
         }
-        Encounter::PersonOncoming | Encounter::PersonHeadOn => {
-            if length_m < 9.0 {
+        Encounter::PersonOncoming | Encounter::PersonHeadOn | Encounter::PersonHeadOnNear => {
+            let near_start = kind == Encounter::PersonHeadOnNear;
+            // (From, to) along the path where the person sets off, and the shortest path
+            // that leaves the robot somewhere to go once they are past.
+            let (far_range, min_length_m) = if near_start {
+                (HEAD_ON_NEAR_M, 6.0)
+            } else {
+                ((7.0, 18.0), 9.0)
+            };
+            if length_m < min_length_m {
                 return None;
             }
             // Only where the two can pass: a narrow stretch between them would leave both
             // waiting for the other.
             let wide_m = route.wide_until(planning, PASSING_CLEARANCE_M);
             let far = rng
-                .gen_range(7.0..18.0_f64)
+                .gen_range(far_range.0..far_range.1)
                 .min(length_m - 0.5)
                 .min(wide_m - 0.5);
-            if far < 7.0 {
+            if far < far_range.0 {
                 return None;
             }
             // Past the robot's start, keeping to their own right (the robot's left), as people
@@ -429,7 +451,7 @@ fn place(
                 .into_iter()
                 .map(|l| route.walk(far, near, l, world))
                 .find(|p| polyline_m(p) >= far - 1.0)?;
-            if polyline_m(&points) < 5.0 {
+            if polyline_m(&points) < if near_start { 4.0 } else { 5.0 } {
                 return None;
             }
             let speed = rng.gen_range(0.4..0.9);
