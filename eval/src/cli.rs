@@ -314,6 +314,10 @@ pub struct RecordArgs {
     /// first that fits: `--encounter-kinds furniture` records only furniture in the way.
     #[arg(long, value_delimiter = ',', requires = "encounters")]
     encounter_kinds: Vec<Encounter>,
+    /// Store only the episodes that got an encounter (the rest are skipped before they run):
+    /// for a kind that fits on few routes, such as `person_head_on`.
+    #[arg(long, requires = "encounters")]
+    encounters_only: bool,
     /// Probability that an episode starts facing a wall 0.5–1.1 m away (its first goal then
     /// to the side or behind): the turn on the spot at a goal by a corridor's end wall.
     #[arg(long, default_value_t = 0.0)]
@@ -474,6 +478,7 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
         samples: args.samples,
         noise: args.noise,
         encounters: args.encounters,
+        encounters_only: args.encounters_only,
         encounter_kinds: if args.encounter_kinds.is_empty() {
             Encounter::DEFAULT.to_vec()
         } else {

@@ -464,6 +464,50 @@ fn encounters_come_only_of_the_kinds_asked_for() {
     }
 }
 
+/// `--encounters-only`: every stored episode got its encounter (the rest were skipped), the
+/// index says so, the option is part of the dataset id, and it is refused without encounters.
+#[test]
+fn encounters_only_stores_only_the_episodes_with_an_encounter() {
+    use eval::record::encounter::Encounter;
+    let mut o = options(0.0, 2);
+    o.scenarios = vec![scenario("train_office.yaml")];
+    o.samples = 400;
+    o.every = 5;
+    o.episode_s = 20.0;
+    o.encounters = 1.0;
+    o.encounter_kinds = vec![Encounter::Furniture];
+    o.encounters_only = true;
+    let out = tempfile::tempdir().unwrap();
+    let summary = record(&o, out.path(), &|_| {}).unwrap();
+    let (index, fields) = read_all(out.path());
+    assert_eq!(index["encounters"]["only"], serde_json::json!(true));
+    let listed: Vec<u32> = index["encounters"]["episodes"]["furniture"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e.as_u64().unwrap() as u32)
+        .collect();
+    let (_, stored) = stored_episodes(&fields);
+    assert!(stored.len() >= 2, "{stored:?}");
+    assert_eq!(stored, listed);
+    // Furniture does not fit on every first leg: some episode numbers were skipped.
+    assert!(
+        stored.last().unwrap() + 1 > stored.len() as u32,
+        "{stored:?}"
+    );
+    let every = RecordOptions {
+        encounters_only: false,
+        ..o.clone()
+    };
+    assert_ne!(every.dataset_id().unwrap(), summary.dataset_id);
+    let refused = RecordOptions {
+        encounters: 0.0,
+        ..o.clone()
+    };
+    let err = refused.validate().unwrap_err().to_string();
+    assert!(err.contains("encounters_only"), "{err}");
+}
+
 /// The episode ids `index.json` lists under `key` (`{probability, episodes}`).
 fn listed_episodes(index: &serde_json::Value, key: &str) -> Vec<u32> {
     index[key]["episodes"]

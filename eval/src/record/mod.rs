@@ -78,6 +78,10 @@ pub struct RecordOptions {
     pub encounters: f64,
     /// ... of one of these kinds, tried in a random order per episode, the first that fits.
     pub encounter_kinds: Vec<encounter::Encounter>,
+    /// Store only episodes that got an encounter: the others are skipped before they run, so
+    /// a recording of a kind that fits on few routes (a head-on person needs a long, wide
+    /// enough first leg) spends its time on that kind. Needs `encounters` above 0.
+    pub encounters_only: bool,
     /// Probability that an episode starts facing a wall up close ([`WALL_START_M`] from the
     /// robot's centre), so that its first goal lies to the side or behind: the states where a
     /// robot that has just reached a goal at a corridor's end must turn round on the spot.
@@ -143,6 +147,7 @@ impl Default for RecordOptions {
             noise: 0.2,
             encounters: 0.0,
             encounter_kinds: encounter::Encounter::DEFAULT.to_vec(),
+            encounters_only: false,
             wall_starts: 0.0,
             goal_starts: 0.0,
             hairpin_starts: 0.0,
@@ -251,6 +256,13 @@ impl RecordOptions {
             if !(0.0..=1.0).contains(&p) {
                 return Err(invalid(field, p.to_string(), "must be in [0, 1]"));
             }
+        }
+        if self.encounters_only && self.encounters <= 0.0 {
+            return Err(invalid(
+                "encounters_only",
+                "true".into(),
+                "needs encounters above 0: no episode would be stored",
+            ));
         }
         let kinds = encounter::Encounter::names(&self.encounter_kinds);
         let distinct: std::collections::BTreeSet<_> = kinds.iter().collect();
@@ -380,6 +392,10 @@ impl RecordOptions {
             // The kinds too: a recording with a kind added is other data at the same P.
             let kinds = encounter::Encounter::names(&self.encounter_kinds);
             h.update(format!("encounters {:?} {kinds:?}\n", self.encounters).as_bytes());
+        }
+        if self.encounters_only {
+            // Hashed only when on, so the ids of recordings made before it stay as they were.
+            h.update(b"encounters_only\n");
         }
         if self.wall_starts > 0.0 {
             // Hashed only when on, so the ids of recordings made before it stay as they were.
@@ -789,6 +805,9 @@ fn run_episode(
         } else {
             None
         };
+    if options.encounters_only && encounter.is_none() {
+        return Ok(empty);
+    }
     let prepared = Prepared {
         path: base.path.clone(),
         scenario: scenario_spec,
@@ -934,10 +953,13 @@ pub fn record(
             }
             if episode.samples.is_empty() {
                 empty_in_a_row += 1;
-                if empty_in_a_row > 50 {
+                // Skipped episodes cost no simulation; a kind that fits on one route in
+                // twenty still stores some long before this many.
+                let limit = if options.encounters_only { 1000 } else { 50 };
+                if empty_in_a_row > limit {
                     return Err(RecordError::Scenario {
-                        path: options.scenarios[episode.scenario].display().to_string(),
-                        reason: "50 episodes in a row gave no samples".into(),
+                        path: loaded[episode.scenario].prepared.path.display().to_string(),
+                        reason: format!("{limit} episodes in a row gave no samples"),
                     });
                 }
                 continue;
@@ -987,6 +1009,7 @@ pub fn record(
     }
     header["encounters"] = serde_json::json!({
         "probability": options.encounters,
+        "only": options.encounters_only,
         "kinds": encounter::Encounter::names(&options.encounter_kinds),
         "episodes": encounters,
     });

@@ -175,6 +175,54 @@ pub fn obstacle_kind(o: &Obstacle) -> &'static str {
     }
 }
 
+/// Where the person or robot `with` names was, seen by the camera of the robot at `pose`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContactSight {
+    /// Their centre's bearing from the robot's centre against its heading (rad, left
+    /// positive, in (-π, π]).
+    pub bearing_rad: f64,
+    /// Whether any of their disc lies inside the camera's horizontal field of view, seen from
+    /// the camera ([`sim::camera::CAMERA_FORWARD_M`] ahead of the centre).
+    pub in_camera_view: bool,
+}
+
+/// [`ContactSight`] of `with` from robot `index` at `pose`; `None` for walls, furniture and
+/// glass, which have no one centre.
+#[must_use]
+pub fn contact_sight(
+    world: &World,
+    index: usize,
+    pose: Pose2D,
+    with: &Obstacle,
+) -> Option<ContactSight> {
+    let (x_m, y_m, radius_m) = match *with {
+        Obstacle::Person(i) => world.people.get(i).map(|p| (p.x_m, p.y_m, p.radius_m))?,
+        Obstacle::Robot(i) if i != index => world
+            .ground_truth_pose(i)
+            .map(|p| (p.x_m, p.y_m, world.config.base.radius_m))?,
+        _ => return None,
+    };
+    let bearing_rad =
+        protocol::normalize_angle((y_m - pose.y_m).atan2(x_m - pose.x_m) - pose.yaw_rad);
+    let (s, c) = pose.yaw_rad.sin_cos();
+    let (cx, cy) = (
+        pose.x_m + sim::camera::CAMERA_FORWARD_M * c,
+        pose.y_m + sim::camera::CAMERA_FORWARD_M * s,
+    );
+    let d_m = (x_m - cx).hypot(y_m - cy);
+    let from_camera = protocol::normalize_angle((y_m - cy).atan2(x_m - cx) - pose.yaw_rad).abs();
+    // The disc's angular half-width; a disc round the camera fills the view.
+    let half_rad = if d_m > radius_m {
+        (radius_m / d_m).asin()
+    } else {
+        std::f64::consts::PI
+    };
+    Some(ContactSight {
+        bearing_rad,
+        in_camera_view: from_camera - half_rad < 0.5 * world.config.camera.hfov_rad,
+    })
+}
+
 /// Gap between robot `index`'s disc and the nearest person's (0 at contact); `None` without
 /// people.
 #[must_use]
@@ -304,5 +352,42 @@ mod tests {
         c.count(&Obstacle::Glass(1));
         c.count(&Obstacle::Person(0));
         assert_eq!((c.glass, c.person, c.total()), (2, 1, 3));
+    }
+
+    #[test]
+    fn contact_sight_is_where_the_person_stands_and_whether_the_camera_sees_them() {
+        let world = World::from_scenario_file(
+            &test_support::scenario("behaviour_person_oncoming"),
+            sim::SimConfig::default(),
+        )
+        .unwrap();
+        let p = &world.people[0];
+        let person = Obstacle::Person(0);
+        let beside = |bearing_deg: f64, d_m: f64| {
+            let b = bearing_deg.to_radians();
+            // The robot `d_m` from them, heading so that they are at `bearing_deg`.
+            let pose = Pose2D::new(p.x_m - d_m, p.y_m, -b);
+            contact_sight(&world, 0, pose, &person).unwrap()
+        };
+        let ahead = beside(0.0, 1.0);
+        assert!(
+            ahead.bearing_rad.abs() < 1e-9 && ahead.in_camera_view,
+            "{ahead:?}"
+        );
+        // Touching (0.5 m centre to centre) at 35° right: their disc reaches well into the
+        // 70° view; at 53° right, as task C's and D's stand-offs, only its nearest 1.5° is
+        // inside, seen from the camera 0.15 m ahead of the centre; at 60° none of it.
+        assert!(beside(-35.0, 0.5).in_camera_view);
+        let stand_off = beside(-53.0, 0.5);
+        assert!(
+            (stand_off.bearing_rad + 53f64.to_radians()).abs() < 1e-9,
+            "{stand_off:?}"
+        );
+        assert!(stand_off.in_camera_view, "{stand_off:?}");
+        assert!(!beside(-60.0, 0.5).in_camera_view);
+        assert!(!beside(90.0, 0.5).in_camera_view);
+        let north = Pose2D::new(p.x_m - 1.0, p.y_m, std::f64::consts::FRAC_PI_2);
+        assert_eq!(contact_sight(&world, 0, north, &Obstacle::Wall), None);
+        assert_eq!(contact_sight(&world, 0, north, &Obstacle::Person(99)), None);
     }
 }

@@ -46,6 +46,43 @@ impl Place {
     }
 }
 
+/// A contact with a person or another robot, with where they were against the robot's heading:
+/// a round's analysis asks first whether the camera could have seen them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MoverContact {
+    pub seed: u64,
+    pub t_s: f64,
+    /// Where the robot was picked up (true position, m).
+    pub x_m: f64,
+    pub y_m: f64,
+    /// `collision: person` or `collision: robot`.
+    pub cause: String,
+    /// Their centre's bearing from the robot's centre against its heading (rad, left positive).
+    pub bearing_rad: f64,
+    /// Whether any of them was inside the camera's horizontal field of view.
+    pub in_camera_view: bool,
+}
+
+/// The contacts with people and robots among some runs' interventions, in seed and time order.
+#[must_use]
+pub fn mover_contacts(runs: &[&RunResult]) -> Vec<MoverContact> {
+    events_in_order(runs)
+        .into_iter()
+        .filter_map(|(seed, e)| {
+            Some(MoverContact {
+                seed,
+                t_s: e.t_s,
+                x_m: e.x_m,
+                y_m: e.y_m,
+                cause: e.cause.clone(),
+                bearing_rad: e.contact_bearing_rad?,
+                in_camera_view: e.contact_in_camera_view?,
+            })
+        })
+        .collect()
+}
+
 /// Groups points (m) into places: points less than [`PLACE_RADIUS_M`] apart are at one place,
 /// and so are chains of them (single linkage: a robot circling a goal leaves a ring of pick-ups
 /// wider than the radius, one place all the same). Each place lists its points' indices in
@@ -226,5 +263,32 @@ mod tests {
         assert_eq!(counts, vec![8, 7, 6, 5, 4]);
         assert!(found.iter().all(|p| p.runs == 1));
         assert!(places(&[&run(0, &[])]).is_empty());
+    }
+
+    #[test]
+    fn mover_contacts_are_listed_in_seed_order_with_their_sight() {
+        let mut late = run(
+            4,
+            &[
+                (20.0, 13.0, "collision: person"),
+                (8.0, 2.0, "collision: wall"),
+            ],
+        );
+        let mut early = run(
+            1,
+            &[(26.6, 13.3, "collision: person"), (3.0, 3.0, "no progress")],
+        );
+        late.intervention_log[0].contact_bearing_rad = Some(-53f64.to_radians());
+        late.intervention_log[0].contact_in_camera_view = Some(false);
+        early.intervention_log[0].contact_bearing_rad = Some(-10f64.to_radians());
+        early.intervention_log[0].contact_in_camera_view = Some(true);
+        let found = mover_contacts(&[&late, &early]);
+        let told: Vec<(u64, bool)> = found.iter().map(|c| (c.seed, c.in_camera_view)).collect();
+        assert_eq!(told, vec![(1, true), (4, false)]);
+        assert_eq!(found[1].cause, "collision: person");
+        assert!((found[1].x_m - 20.0).abs() < 1e-12);
+        assert!((found[1].bearing_rad + 53f64.to_radians()).abs() < 1e-12);
+        // Walls and stalls have no sight and are not listed.
+        assert!(mover_contacts(&[&run(0, &[(1.0, 1.0, "collision: wall")])]).is_empty());
     }
 }

@@ -7,7 +7,7 @@ use protocol::ControllerKind;
 use serde::{Deserialize, Serialize};
 
 use super::audit::IntentionAudit;
-use super::places::{self, Place};
+use super::places::{self, MoverContact, Place};
 use super::run::{Prepared, RunResult, RunTrace};
 use super::TableError;
 use crate::figure::{self, GridRow, Trace};
@@ -115,6 +115,10 @@ pub struct Row {
     /// before 2026-11-30.
     #[serde(default)]
     pub intervention_places: Vec<Place>,
+    /// The interventions for a contact with a person or robot, with their bearing
+    /// ([`places::mover_contacts`]); empty in tables made before 2026-12-03.
+    #[serde(default)]
+    pub mover_contacts: Vec<MoverContact>,
 }
 
 /// `table.json`: the rows and how they were made.
@@ -198,6 +202,7 @@ pub fn rows(runs: &[RunResult]) -> Vec<Row> {
                     group.iter().filter_map(|r| r.intention_audit.as_ref()),
                 ),
                 intervention_places: places::places(&group),
+                mover_contacts: places::mover_contacts(&group),
                 scenario,
             }
         })
@@ -256,6 +261,9 @@ pub fn markdown(table: &Table) -> String {
     }
     if table.rows.iter().any(|r| !r.intervention_places.is_empty()) {
         out.push_str(&places_markdown(&table.rows));
+    }
+    if table.rows.iter().any(|r| !r.mover_contacts.is_empty()) {
+        out.push_str(&contacts_markdown(&table.rows));
     }
     out.push_str(&format!(
         "\n{} runs, {:.0} simulated s in {:.0} s wall clock on {} jobs: real-time factor {:.1}.\n",
@@ -331,6 +339,36 @@ fn places_markdown(rows: &[Row]) -> String {
                 p.interventions,
                 p.runs,
                 p.causes_text(),
+            ));
+        }
+    }
+    out
+}
+
+/// Each contact with a person or robot and whether the camera could see them.
+fn contacts_markdown(rows: &[Row]) -> String {
+    let mut out = format!(
+        "\nContacts with people and robots: their centre's bearing from the robot's heading when \
+         the human stepped in (left positive), and whether any of them was inside the camera's \
+         {:.0}° view, seen from the camera {:.2} m ahead of the robot's centre.\n\n\
+         | scenario | method | seed | t (s) | at (x, y) (m) | with | bearing (°) | in the camera's view |\n\
+         |---|---|---|---|---|---|---|---|\n",
+        sim::SimConfig::default().camera.hfov_rad.to_degrees(),
+        sim::camera::CAMERA_FORWARD_M,
+    );
+    for r in rows {
+        for c in &r.mover_contacts {
+            out.push_str(&format!(
+                "| {} | {} | {} | {:.1} | ({:.1}, {:.1}) | {} | {:+.0} | {} |\n",
+                r.scenario,
+                r.method,
+                c.seed,
+                c.t_s,
+                c.x_m,
+                c.y_m,
+                c.cause.trim_start_matches("collision: "),
+                c.bearing_rad.to_degrees(),
+                if c.in_camera_view { "yes" } else { "no" },
             ));
         }
     }

@@ -175,6 +175,14 @@ pub struct InterventionEvent {
     pub y_m: f64,
     /// `collision: <what>` or `no progress`.
     pub cause: String,
+    /// For a contact with a person or another robot: where their centre was, seen from the
+    /// robot's centre, against its heading (rad, left positive) ...
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub contact_bearing_rad: Option<f64>,
+    /// ... and whether any of them was inside the camera's field of view: if not, a
+    /// camera-driven controller could not see what it touched.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub contact_in_camera_view: Option<bool>,
 }
 
 /// The picture material of a run (kept in memory for the figures, not in `runs.json`).
@@ -529,6 +537,9 @@ pub fn run_with(
                 auditor.on_intervention(t_s);
                 interventions += 1;
                 trace.interventions_m.push((truth_pose.x_m, truth_pose.y_m));
+                let sight = collided
+                    .as_ref()
+                    .and_then(|w| judge::contact_sight(&world, 0, truth_pose, w));
                 intervention_log.push(InterventionEvent {
                     t_s,
                     x_m: truth_pose.x_m,
@@ -537,6 +548,8 @@ pub fn run_with(
                         || "no progress".to_string(),
                         |w| format!("collision: {}", judge::obstacle_kind(w)),
                     ),
+                    contact_bearing_rad: sight.map(|s| s.bearing_rad),
+                    contact_in_camera_view: sight.map(|s| s.in_camera_view),
                 });
                 tracing::debug!(scenario = %name, %method, seed, t_s, ?truth_pose, ?put, ?collided, "intervention");
                 last_truth = put;
@@ -828,6 +841,8 @@ pub(crate) fn test_run_with_log(
             x_m,
             y_m,
             cause: cause.to_string(),
+            contact_bearing_rad: None,
+            contact_in_camera_view: None,
         })
         .collect();
     run
