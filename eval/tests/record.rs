@@ -481,12 +481,7 @@ fn encounters_only_stores_only_the_episodes_with_an_encounter() {
     let summary = record(&o, out.path(), &|_| {}).unwrap();
     let (index, fields) = read_all(out.path());
     assert_eq!(index["encounters"]["only"], serde_json::json!(true));
-    let listed: Vec<u32> = index["encounters"]["episodes"]["furniture"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|e| e.as_u64().unwrap() as u32)
-        .collect();
+    let listed = episode_ids(&index["encounters"]["episodes"]["furniture"]);
     let (_, stored) = stored_episodes(&fields);
     assert!(stored.len() >= 2, "{stored:?}");
     assert_eq!(stored, listed);
@@ -510,8 +505,12 @@ fn encounters_only_stores_only_the_episodes_with_an_encounter() {
 
 /// The episode ids `index.json` lists under `key` (`{probability, episodes}`).
 fn listed_episodes(index: &serde_json::Value, key: &str) -> Vec<u32> {
-    index[key]["episodes"]
-        .as_array()
+    episode_ids(&index[key]["episodes"])
+}
+
+/// A JSON array of episode ids.
+fn episode_ids(ids: &serde_json::Value) -> Vec<u32> {
+    ids.as_array()
         .unwrap()
         .iter()
         .map(|e| e.as_u64().unwrap() as u32)

@@ -415,7 +415,10 @@ fn render_column(
     }
 }
 
-fn camera_origin(pose: Pose2D) -> (f64, f64, f64) {
+/// Where the camera of a robot at `pose` sits and looks: (x, y, yaw), [`CAMERA_FORWARD_M`] ahead
+/// of the robot's centre.
+#[must_use]
+pub fn camera_origin(pose: Pose2D) -> (f64, f64, f64) {
     let (s, c) = pose.yaw_rad.sin_cos();
     (
         pose.x_m + CAMERA_FORWARD_M * c,

@@ -204,11 +204,7 @@ pub fn contact_sight(
     };
     let bearing_rad =
         protocol::normalize_angle((y_m - pose.y_m).atan2(x_m - pose.x_m) - pose.yaw_rad);
-    let (s, c) = pose.yaw_rad.sin_cos();
-    let (cx, cy) = (
-        pose.x_m + sim::camera::CAMERA_FORWARD_M * c,
-        pose.y_m + sim::camera::CAMERA_FORWARD_M * s,
-    );
+    let (cx, cy, _) = sim::camera::camera_origin(pose);
     let d_m = (x_m - cx).hypot(y_m - cy);
     let from_camera = protocol::normalize_angle((y_m - cy).atan2(x_m - cx) - pose.yaw_rad).abs();
     // The disc's angular half-width; a disc round the camera fills the view.
