@@ -228,6 +228,11 @@ pub struct TableArgs {
     /// a network by itself have always run it.
     #[arg(long)]
     no_recovery: bool,
+    /// Lets the recovering dynamic window drive across where LPE-Net braked for something the
+    /// laser does not see, without the agent's camera hold (`[safety.camera_hold]`), as in
+    /// every table before 2026-12-04 (`--no-recovery` implies it).
+    #[arg(long)]
+    no_camera_hold: bool,
     /// Lets the controller turn the robot round itself when its path starts behind it, without
     /// the agent's rotation shim (`[rotation_shim]`), as in every table before 2026-11-27's
     /// sixteenth session (`--no-recovery` implies it).
@@ -586,6 +591,9 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
     }
     if args.no_recovery {
         agent.safety.recovery.enabled = false;
+    }
+    if args.no_camera_hold || args.no_recovery {
+        agent.safety.camera_hold.enabled = false;
     }
     if args.no_rotation_shim || args.no_recovery {
         agent.rotation_shim.enabled = false;

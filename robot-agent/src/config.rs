@@ -8,6 +8,7 @@ pub use protocol::{ControllerKind, UnknownController};
 use protocol::{MapName, Pose2D, SiteId};
 
 use crate::amcl::{AmclConfig, AmclError};
+use crate::camera_hold::CameraHoldConfig;
 use crate::collision_monitor::CollisionMonitorConfig;
 use crate::controllers::{DynamicWindowConfig, PathTrackerConfig};
 use crate::give_way::GiveWayConfig;
@@ -54,6 +55,9 @@ pub struct Safety {
     pub collision_monitor: CollisionMonitorConfig,
     /// The dynamic window takes over while the monitor keeps the controller from moving on.
     pub recovery: RecoveryConfig,
+    /// A camera-driven controller that brakes for what the laser does not see stays behind
+    /// where it meant to stop.
+    pub camera_hold: CameraHoldConfig,
 }
 
 impl Default for Safety {
@@ -65,6 +69,7 @@ impl Default for Safety {
             relocalize_spin_radps: 1.0,
             collision_monitor: CollisionMonitorConfig::default(),
             recovery: RecoveryConfig::default(),
+            camera_hold: CameraHoldConfig::default(),
         }
     }
 }
@@ -236,6 +241,7 @@ impl AgentConfig {
         }
         self.safety.collision_monitor.validate()?;
         self.safety.recovery.validate()?;
+        self.safety.camera_hold.validate()?;
         self.unmapped_obstacles.validate()?;
         self.rotation_shim.validate()?;
         self.give_way.validate()?;

@@ -14,6 +14,7 @@
 //!   with each pose so the planner routes round it.
 
 pub mod amcl;
+pub mod camera_hold;
 pub mod cli;
 pub mod collision_monitor;
 pub mod config;
@@ -27,6 +28,7 @@ pub mod rotation_shim;
 pub mod unmapped;
 
 pub use amcl::{Amcl, AmclConfig, Estimate, LikelihoodField, UpdateOutcome};
+pub use camera_hold::{CameraHold, CameraHoldConfig};
 pub use collision_monitor::{CollisionMonitorConfig, Verdict};
 pub use config::{AgentConfig, ControllerKind, Limits, Localization, Safety};
 pub use controllers::{Control, ControlInput, Controller, ControllerError};

@@ -40,6 +40,7 @@ use zenoh::handlers::RingChannel;
 use zenoh::Session;
 
 use crate::amcl::{Amcl, AmclError, Estimate, LikelihoodField, UpdateOutcome};
+use crate::camera_hold::{CameraHold, Observation as HoldObservation};
 use crate::collision_monitor::{self, MovingBody, Verdict};
 use crate::config::{AgentConfig, ConfigError, ControllerKind, Limits};
 use crate::controllers::{
@@ -242,6 +243,11 @@ pub struct Supervisor {
     unmapped_seen: Vec<[f64; 2]>,
     /// What the collision monitor did to the last command.
     last_verdict: Option<Verdict>,
+    /// Keeps the recovery behind where the camera-driven controller braked for what the laser
+    /// does not see (none when off or not for this controller, [`CameraHold`]).
+    camera_hold: Option<CameraHold>,
+    /// What the hold looks at this cycle (set while the controller drives).
+    hold_obs: Option<HoldObservation>,
     /// Whether the fallback drove the last cycle.
     recovering: bool,
     odometry: VecDeque<Odometry>,
@@ -307,6 +313,11 @@ impl Supervisor {
             None
         };
         let recovery = Recovery::new(config.safety.recovery);
+        let camera_hold = config
+            .safety
+            .camera_hold
+            .applies_to(controller.kind())
+            .then(|| CameraHold::new(config.safety.camera_hold));
         let shim = (config.rotation_shim.enabled && relieved)
             .then(|| RotationShim::new(config.rotation_shim));
         let give_way = (config.give_way.enabled && controller.kind() != ControllerKind::Expert)
@@ -332,6 +343,8 @@ impl Supervisor {
             unmapped,
             unmapped_seen: Vec::new(),
             last_verdict: None,
+            camera_hold,
+            hold_obs: None,
             recovering: false,
             odometry: VecDeque::with_capacity(ODOM_HISTORY),
             scan: None,
@@ -399,6 +412,9 @@ impl Supervisor {
         self.intention = None;
         self.reset_controllers();
         self.recovery.idle(0.0);
+        if let Some(hold) = &mut self.camera_hold {
+            hold.reset();
+        }
         Ok(())
     }
 
@@ -544,7 +560,19 @@ impl Supervisor {
         self.monitor = None;
         self.moving.clear();
         self.movers_since_s += dt;
+        self.hold_obs = None;
         let (target, state, reason) = self.target(now, dt, &limits);
+        let obs = self.hold_obs.take();
+        let target = match (target, self.camera_hold.as_mut(), obs) {
+            (Some((v, w)), Some(hold), Some(obs)) if state == AgentState::Driving => {
+                let obs = HoldObservation {
+                    recovering: self.recovering,
+                    ..obs
+                };
+                Some((hold.cycle(dt, &obs, v, limits.max_accel_mps2), w))
+            }
+            (target, ..) => target,
+        };
         let (mut v, mut w) = match target {
             // Driving: the controller's command within the acceleration limits.
             Some((v, w)) => (
@@ -625,6 +653,13 @@ impl Supervisor {
     #[must_use]
     pub fn recovers(&self) -> bool {
         self.fallback.is_some()
+    }
+
+    /// How many camera holds have started (`None`: the hold is off or not for this
+    /// controller).
+    #[must_use]
+    pub fn camera_holds(&self) -> Option<u32> {
+        self.camera_hold.as_ref().map(CameraHold::holds)
     }
 
     /// How many times the dynamic window has taken over from the configured controller.
@@ -713,6 +748,23 @@ impl Supervisor {
             dt_s: dt,
         };
         let goal = intention.path.last().copied();
+        self.hold_obs = self.camera_hold.is_some().then(|| HoldObservation {
+            pose,
+            last_command_mps: self.cmd_v_mps,
+            commanded_mps: None,
+            ahead_m: self
+                .scan
+                .as_ref()
+                .map_or(f64::INFINITY, crate::recovery::ahead_m),
+            goal,
+            path_bend_rad: crate::camera_hold::path_bend_rad(
+                pose,
+                &intention.path,
+                self.config.safety.camera_hold.path_ahead_m,
+            ),
+            mover_m: f64::INFINITY,
+            recovering: false,
+        });
         let monitor = &self.config.safety.collision_monitor;
         let tracking = self.give_way.is_some() || (monitor.enabled && monitor.track_movers);
         let held = match self.scan.as_ref().filter(|_| tracking) {
@@ -745,6 +797,15 @@ impl Supervisor {
             }
             None => None,
         };
+        if let Some(obs) = self.hold_obs.as_mut() {
+            // The tracks are this cycle's where the scan was tracked, else the last scan's.
+            obs.mover_m = self
+                .movers
+                .tracks()
+                .iter()
+                .map(|t| (t.x_m - pose.x_m).hypot(t.y_m - pose.y_m))
+                .fold(f64::INFINITY, f64::min);
+        }
         if let Some(spot) = held.and_then(|h| h.wait_at_m) {
             self.recovery.idle(dt);
             if let Some(shim) = &mut self.shim {
@@ -804,6 +865,10 @@ impl Supervisor {
         match controller.control(&input) {
             Ok(control) => {
                 let command = Control::clamped(control).to_physical(limits);
+                if let (Some(obs), false, None) = (self.hold_obs.as_mut(), recovering, hold) {
+                    // The controller's own wish, before anyone changed it.
+                    obs.commanded_mps = Some(command.0);
+                }
                 (Some(capped(command, hold)), AgentState::Driving, None)
             }
             Err(e) => stop(StopReason::ControllerError {

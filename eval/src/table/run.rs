@@ -158,6 +158,10 @@ pub struct RunResult {
     /// How many times the dynamic window took over (`None` as for `recovery_share`).
     #[serde(default)]
     pub recoveries: Option<u32>,
+    /// How many camera holds started (`[safety.camera_hold]`; `None`: off, or not for this
+    /// method: only LPE-Net's brakes count by default).
+    #[serde(default)]
+    pub camera_holds: Option<u32>,
     /// The DLM told against the DLM the true pose would have given (`None`: not audited).
     #[serde(default)]
     pub intention_audit: Option<super::audit::IntentionAudit>,
@@ -183,6 +187,11 @@ pub struct InterventionEvent {
     /// camera-driven controller could not see what it touched.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub contact_in_camera_view: Option<bool>,
+    /// The gap between the robot's disc and the nearest glass pane then (absent without
+    /// glass): a "no progress" a few decimetres from a pane is a robot standing before a shut
+    /// glass door, as it should.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub glass_gap_m: Option<f64>,
 }
 
 /// The picture material of a run (kept in memory for the figures, not in `runs.json`).
@@ -508,6 +517,8 @@ pub fn run_with(
                 ));
                 break;
             }
+            // Before the robot is carried away from it.
+            let glass_gap_m = judge::glass_gap_m(&world, 0);
             if let Some(put) = judge::put_down_pose(
                 &world,
                 0,
@@ -550,6 +561,7 @@ pub fn run_with(
                     ),
                     contact_bearing_rad: sight.map(|s| s.bearing_rad),
                     contact_in_camera_view: sight.map(|s| s.in_camera_view),
+                    glass_gap_m,
                 });
                 tracing::debug!(scenario = %name, %method, seed, t_s, ?truth_pose, ?put, ?collided, "intervention");
                 last_truth = put;
@@ -751,6 +763,7 @@ pub fn run_with(
         #[allow(clippy::cast_precision_loss)]
         recovery_share: supervisor.recovers().then(|| recovering_cycles as f64 / n),
         recoveries: supervisor.recovers().then(|| supervisor.recoveries()),
+        camera_holds: supervisor.camera_holds(),
         intention_audit: truth_pipeline.is_some().then(|| auditor.finish()),
         wall_s: started.elapsed().as_secs_f64(),
     };
@@ -814,6 +827,7 @@ pub(crate) fn test_run(
         collision_monitor_share: None,
         recovery_share: None,
         recoveries: None,
+        camera_holds: None,
         intention_audit: None,
         wall_s: 1.0,
     }
@@ -843,6 +857,7 @@ pub(crate) fn test_run_with_log(
             cause: cause.to_string(),
             contact_bearing_rad: None,
             contact_in_camera_view: None,
+            glass_gap_m: None,
         })
         .collect();
     run
