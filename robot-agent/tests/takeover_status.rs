@@ -1,6 +1,8 @@
 //! The supervisor in lock step with the simulator, without Zenoh: its decision, and the status
 //! the node publishes from it, say when the rotation shim turns the robot on the spot and when
-//! the give-way rule holds it short of a narrow passage (what the dashboard shows the operator).
+//! the give-way rule holds it short of a narrow passage (what the dashboard shows the operator);
+//! and the recovery that relieves a camera-driven controller stays behind the camera hold's line
+//! before a shut glass door.
 //!
 //! The loop is `eval table`'s in small: the world steps, the supervisor takes the odometry and
 //! the scan, and a fixed path, from the point nearest the robot on, answers every pose it
@@ -18,7 +20,10 @@ use protocol::{
     TaskId,
 };
 use robot_agent::node::Decision;
-use robot_agent::{make_controller, AgentConfig, ControllerKind, Supervisor};
+use robot_agent::{
+    make_controller, AgentConfig, Control, ControlInput, Controller, ControllerError,
+    ControllerKind, Supervisor,
+};
 use sim::scenario::{PersonSpec, PointSpec, PoseSpec};
 use sim::{Command, Scenario, SimConfig, World};
 use test_support::scenario;
@@ -50,6 +55,25 @@ struct Run {
 impl Run {
     /// `name`'s scenario with the robot at `start` and `people` instead of the scenario's.
     fn new(name: &str, start: Pose2D, people: Vec<PersonSpec>, path: Vec<Pose2D>) -> Self {
+        let config = AgentConfig {
+            controller: ControllerKind::PathTracker,
+            ..AgentConfig::default()
+        };
+        let controller = make_controller(&config).unwrap();
+        Self::with(name, start, people, path, config, controller, true)
+    }
+
+    /// As [`Run::new`], with `controller` driving under `config`, on the floor plan alone
+    /// unless `furniture_drawn_in`.
+    fn with(
+        name: &str,
+        start: Pose2D,
+        people: Vec<PersonSpec>,
+        path: Vec<Pose2D>,
+        mut config: AgentConfig,
+        controller: Box<dyn Controller>,
+        furniture_drawn_in: bool,
+    ) -> Self {
         let file = scenario(name);
         let mut spec = Scenario::load(&file).unwrap();
         spec.start = PoseSpec {
@@ -62,23 +86,23 @@ impl Run {
         let plan = map_core::load_ros_map(&spec.floor_plan_path(&file), &ImportLimits::default())
             .unwrap()
             .grid;
-        let mut world = World::new(spec, plan, SimConfig::default()).unwrap();
+        let mut world = World::new(spec, plan.clone(), SimConfig::default()).unwrap();
         world.add_robots_at_start(1).unwrap();
-        let mut config = AgentConfig {
-            controller: ControllerKind::PathTracker,
-            ..AgentConfig::default()
-        };
         // The operator places the robot and tells the agent where.
         config.localization.initial_pose = Some(start);
         let map = MapRef {
             name: MapName::new("plan").unwrap(),
             version: 1,
         };
-        let controller = make_controller(&config).unwrap();
         // The floor plan with the furniture drawn in: a narrow passage is narrow on the agent's
-        // map from the start, rather than once the obstacle layer has confirmed the furniture.
-        let supervisor =
-            Supervisor::new(config, map.clone(), &world.ground_truth_grid(), controller).unwrap();
+        // map from the start, rather than once the obstacle layer has confirmed the furniture
+        // (the glass too: where the laser sees through a pane, AMCL must not expect a wall).
+        let grid = if furniture_drawn_in {
+            world.ground_truth_grid()
+        } else {
+            plan
+        };
+        let supervisor = Supervisor::new(config, map.clone(), &grid, controller).unwrap();
         Self {
             world,
             supervisor,
@@ -347,4 +371,81 @@ fn a_relieving_window_beside_a_thin_walls_end_drives_round_it() {
         end.x_m < 20.8 && end.y_m < 15.5,
         "round the wall's end and down the corridor beyond within 15 s: {end:?}"
     );
+}
+
+/// A camera-driven controller as LPE-Net drives before a shut glass door: full speed along its
+/// path, then, `brake_x_m` along the corridor, a stop for what it saw (the laser sees nothing).
+struct BrakingNetwork {
+    brake_x_m: f64,
+}
+
+impl Controller for BrakingNetwork {
+    fn kind(&self) -> ControllerKind {
+        ControllerKind::Lpe
+    }
+
+    fn control(&mut self, input: &ControlInput<'_>) -> Result<Control, ControllerError> {
+        let v_norm = if input.pose.x_m < self.brake_x_m {
+            1.0
+        } else {
+            0.0
+        };
+        // Steers back onto the corridor's middle line, y = 5.2, heading +x.
+        let omega_norm = (-1.5 * (input.pose.y_m - 5.2) - input.pose.yaw_rad).clamp(-1.0, 1.0);
+        Ok(Control { v_norm, omega_norm })
+    }
+}
+
+#[test]
+fn the_recovery_stays_behind_where_the_network_braked_before_a_shut_glass_door() {
+    // The behaviour scenario's corridor, its shut glass door across it at x = 14. The goal lies
+    // 0.3 m past the door; the network stops 1.6 m before the door, within the recovery's
+    // 2 m of the goal, so the dynamic window, which the pane is invisible to, takes over and
+    // heads for the goal.
+    let start = Pose2D::new(8.0, 5.2, 0.0);
+    let path: Vec<Pose2D> = (0..=63)
+        .map(|k| Pose2D::new(8.0 + 0.1 * f64::from(k), 5.2, 0.0))
+        .collect();
+    let run = |hold: bool| {
+        let mut config = AgentConfig {
+            controller: ControllerKind::Lpe,
+            ..AgentConfig::default()
+        };
+        config.safety.camera_hold.enabled = hold;
+        let network = Box::new(BrakingNetwork { brake_x_m: 12.4 });
+        let mut run = Run::with(
+            "behaviour_glass_door",
+            start,
+            Vec::new(),
+            path.clone(),
+            config,
+            network,
+            false,
+        );
+        let cycles: Vec<Cycle> = (0..250).map(|_| run.cycle()).collect();
+        let recovered = cycles.iter().any(|c| c.decision.recovering);
+        let contacts: usize = cycles.iter().map(|c| c.collisions).sum();
+        let furthest_x_m = cycles
+            .iter()
+            .map(|c| c.truth.x_m)
+            .fold(f64::NEG_INFINITY, f64::max);
+        (
+            recovered,
+            contacts,
+            furthest_x_m,
+            run.supervisor.camera_holds(),
+        )
+    };
+    let (recovered, contacts, furthest_x_m, holds) = run(true);
+    assert!(recovered, "the window takes over short of the goal");
+    assert_eq!(holds, Some(1));
+    assert_eq!(contacts, 0);
+    // The line: braking from 0.7 m/s at 0.8 m/s² takes 0.31 m, and 0.1 m more, from where the
+    // network braked (12.4 m as AMCL has it); the robot's disc would touch the pane from 13.75.
+    assert!(furthest_x_m < 13.0, "{furthest_x_m}");
+    // Without the hold the window drives on into the pane.
+    let (recovered, contacts, furthest_x_m, holds) = run(false);
+    assert!(recovered);
+    assert_eq!(holds, None);
+    assert!(contacts > 0, "{furthest_x_m}");
 }
