@@ -565,10 +565,6 @@ impl Supervisor {
         let obs = self.hold_obs.take();
         let target = match (target, self.camera_hold.as_mut(), obs) {
             (Some((v, w)), Some(hold), Some(obs)) if state == AgentState::Driving => {
-                let obs = HoldObservation {
-                    recovering: self.recovering,
-                    ..obs
-                };
                 Some((hold.cycle(dt, &obs, v, limits.max_accel_mps2), w))
             }
             (target, ..) => target,
@@ -865,9 +861,12 @@ impl Supervisor {
         match controller.control(&input) {
             Ok(control) => {
                 let command = Control::clamped(control).to_physical(limits);
-                if let (Some(obs), false, None) = (self.hold_obs.as_mut(), recovering, hold) {
-                    // The controller's own wish, before anyone changed it.
-                    obs.commanded_mps = Some(command.0);
+                if let Some(obs) = self.hold_obs.as_mut() {
+                    obs.recovering = recovering;
+                    if !recovering && hold.is_none() {
+                        // The controller's own wish, before anyone changed it.
+                        obs.commanded_mps = Some(command.0);
+                    }
                 }
                 (Some(capped(command, hold)), AgentState::Driving, None)
             }
