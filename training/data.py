@@ -45,6 +45,13 @@ DLM_NAMES = ("turn_left", "turn_right", "go_forward", "stop")
 GO_FORWARD = 2
 # |omega label| (normalised) bin edges for balancing: straight, gentle, turning, sharp.
 OMEGA_BINS = (0.1, 0.3, 0.6)
+# What a sample's speed label is: the expert's command (its filter's output, the current motion
+# plus a bounded step) or the target speed that filter steers towards. A network that does not
+# see the current speed learns from the command a mean over the speeds the robot happened to
+# have in that view, so from rest (after a turn on the spot) it creeps; the target does not
+# depend on the current speed, and the agent's acceleration limit makes the ramp. The turn
+# rate always stays the command's: its target jumps to the limit on every turn.
+SPEED_LABELS = ("command", "target")
 # Normalised speed label below which a frame counts as slow (0.2 of 0.7 m/s: 0.14 m/s).
 SLOW_V = 0.2
 # Limits of the robot agent (robot-agent/src/config.rs Limits::default) for recordings whose
@@ -78,9 +85,11 @@ class Pool:
     one of each). Episode keys are (recording, episode) so equal episode numbers of different
     recordings stay different episodes."""
 
-    def __init__(self, dirs: list[str | Path], preload: tuple[str, ...] = ()):
+    def __init__(self, dirs: list[str | Path], preload: tuple[str, ...] = (), speed_label: str = "command"):
         if not dirs:
             raise ValueError("no dataset folder given")
+        if speed_label not in SPEED_LABELS:
+            raise ValueError(f"speed_label {speed_label!r} is not one of {SPEED_LABELS}")
         self.sets = [dataset.load(d) for d in dirs]
         first = self.sets[0]
         self.camera_px = tuple(first.index["fields"]["camera"]["shape"][:2])
@@ -142,6 +151,16 @@ class Pool:
                     shard[name] = np.array(shard[name])
         self.dlm = np.concatenate([ds.field("dlm") for ds in self.sets]).astype(np.int64)
         self.label = np.concatenate([ds.field("label") for ds in self.sets]).astype(np.float32)
+        self.speed_label = speed_label
+        if speed_label == "target":
+            missing = [str(ds.root) for ds in self.sets if "target" not in ds.fields]
+            if missing:
+                raise ValueError(
+                    f"speed_label 'target': {', '.join(missing)} has no 'target' field (recorded before "
+                    "`eval record` stored the expert's target); record it again or train with speed_label 'command'"
+                )
+            target = np.concatenate([ds.field("target") for ds in self.sets]).astype(np.float32)
+            self.label[:, 0] = target[:, 0]
         self.episode_key = np.concatenate(
             [(np.int64(i) << 32) | ds.field("episode").astype(np.int64) for i, ds in enumerate(self.sets)]
         )

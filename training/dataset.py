@@ -137,6 +137,12 @@ def summary(ds: Dataset) -> str:
         f"  label v: mean {label[:, 0].mean():+.3f} std {label[:, 0].std():.3f}; "
         f"omega: mean {label[:, 1].mean():+.3f} std {label[:, 1].std():.3f}"
     )
+    if "target" in ds.fields:
+        target = ds.field("target")
+        lines.append(
+            f"  target v: mean {target[:, 0].mean():+.3f}; above the label v by 0.2 or more in "
+            f"{(target[:, 0] >= label[:, 0] + 0.2).mean():.1%} of the samples (setting off)"
+        )
     perturbed = np.abs(executed[:, 1] - label[:, 1]) > 1e-6
     lines.append(f"  samples whose executed command differs from the label: {perturbed.sum()}")
     return "\n".join(lines)

@@ -98,6 +98,9 @@ def deviations(recipe: dict, model_config: dict, camera_px: int, lpe_px: int, in
     if recipe["balance"]:
         cells = "(DLM class, |omega| bin, slow/moving)" if recipe.get("balance_speed") else "(DLM class, |omega| bin)"
         d.append(f"balanced sampling: equal mass per {cells} cell, boost capped at 10x, instead of uniform")
+    if recipe.get("speed_label") == "target":
+        d.append("speed label: the target speed the expert's command filter steers towards, not its filtered "
+                 "command (which from rest is the current motion plus a bounded step); turn rate the command's")
     if recipe["augment"]:
         d.append("photometric augmentation of the camera image (brightness, multiply, contrast, blur, noise, pixel dropout)")
     if kind == "dlm" and recipe["randomize_intention"] > 0:

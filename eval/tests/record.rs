@@ -139,9 +139,12 @@ fn a_short_recording_has_the_documented_files_and_values() {
 
     let label = f32s(&fields["label"]);
     let executed = f32s(&fields["executed"]);
+    let target = f32s(&fields["target"]);
+    assert_eq!(target.len(), label.len());
     assert!(label
         .iter()
         .chain(&executed)
+        .chain(&target)
         .all(|v| (-1.0..=1.0).contains(v)));
     assert!(
         label.chunks(2).any(|c| c[0] > 0.1),
@@ -588,6 +591,23 @@ fn wall_starts_face_a_wall_and_the_expert_turns_on_the_spot() {
         2 * turning > distinct.len(),
         "{turning} of {}",
         distinct.len()
+    );
+    // The expert's target sets off at once where its command creeps up from rest: in the
+    // first sample of each episode whose label moves, the target speed is well above it (a
+    // network that cannot see the current speed learns the target, the agent ramps it).
+    let target = f32s(&fields["target"]);
+    let setting_off = distinct
+        .iter()
+        .filter_map(|e| (0..episodes.len()).find(|&i| episodes[i] == *e && label[2 * i] > 0.02))
+        .collect::<Vec<_>>();
+    let leading = setting_off
+        .iter()
+        .filter(|&&i| target[2 * i] >= label[2 * i] + 0.3)
+        .count();
+    assert!(
+        3 * leading >= 2 * setting_off.len() && leading > 0,
+        "the target led the label at {leading} of {} set-offs",
+        setting_off.len()
     );
 
     let off = RecordOptions {

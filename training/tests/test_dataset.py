@@ -6,6 +6,8 @@ test's synthetic recording (4 shards: 250, 250, 250, 30 samples):
   recording has both, and the sources name the share;
 * `@1` is the whole recording;
 * recordings labelled with other DLM parameters are refused together;
+* `speed_label="target"` trains speed on the expert's target and the turn rate on its command,
+  and refuses, naming it, a recording without the target field;
 * refused, naming the value: a share of 0, above 1, or not a number.
 
     .venv/bin/python training/tests/test_dataset.py
@@ -68,6 +70,33 @@ def check(root: Path) -> None:
         assert "turn_release_rad" in str(e) and "labelled alike" in str(e), e
     else:
         raise AssertionError("recordings of two DLM parameter sets were pooled")
+
+    # Speed from the expert's target, turn rate from its command.
+    targeted = data.Pool([str(root)], speed_label="target")
+    assert np.array_equal(targeted.label[:, 0], whole.field("target")[:, 0])
+    assert np.array_equal(targeted.label[:, 1], whole.field("label")[:, 1])
+    assert not np.array_equal(targeted.label[:, 0], whole.field("label")[:, 0])
+    from training import recipe
+
+    r = recipe.resolve("default", {"speed_label": "target"})
+    assert any("target speed" in d for d in recipe.deviations(r, {"kind": "lpe"}, 128, 128, [], None))
+    older = root.parent / "older"
+    shutil.copytree(root, older)
+    index = json.loads((older / "index.json").read_text())
+    del index["fields"]["target"]
+    (older / "index.json").write_text(json.dumps(index))
+    try:
+        data.Pool([str(root), str(older)], speed_label="target")
+    except ValueError as e:
+        assert "'target'" in str(e) and str(older) in str(e), e
+    else:
+        raise AssertionError("a recording without targets trained on targets")
+    try:
+        data.Pool([str(root)], speed_label="goal")
+    except ValueError as e:
+        assert "'goal'" in str(e), e
+    else:
+        raise AssertionError("an unknown speed label was accepted")
 
     for bad, says in (("0", "0.0"), ("1.5", "1.5"), ("half", "'half'")):
         try:

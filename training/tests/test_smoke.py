@@ -54,6 +54,8 @@ def write_synthetic(root: Path, seed: int = 0) -> None:
     dlm[np.arange(n) % PER_EPISODE >= PER_EPISODE - 5] = 3  # stop at the end of every episode
     v = np.where(dlm == 3, 0.0, 0.9 - 0.4 * np.abs(omega)).astype(np.float32)
     label = np.stack([v, omega], 1)
+    # The expert's target speed: its command reaches it (here, a step above the command while moving).
+    target = np.stack([np.where(dlm == 3, 0.0, np.minimum(v + 0.1, 1.0)).astype(np.float32), np.sign(omega)], 1)
     camera = np.full((n, PX, PX, 3), 90, np.uint8)
     lpe = np.full((n, PX, PX, 3), 255, np.uint8)
     cols = ((1 - omega) / 2 * (PX - 6)).astype(int)
@@ -64,7 +66,8 @@ def write_synthetic(root: Path, seed: int = 0) -> None:
         lpe[i, : PX // 2, cols[i] : cols[i] + 2] = (0, 0, 255)
     camera = np.clip(camera.astype(np.int16) + rng.integers(-8, 9, camera.shape), 0, 255).astype(np.uint8)
     fields = {
-        "camera": camera, "lpe": lpe, "dlm": dlm, "label": label, "executed": label.copy(),
+        "camera": camera, "lpe": lpe, "dlm": dlm, "label": label, "target": target.astype(np.float32),
+        "executed": label.copy(),
         "pose_true": np.zeros((n, 3), np.float32), "pose_amcl": np.zeros((n, 3), np.float32),
         "scenario": (episode % 2).astype(np.uint32), "episode": episode, "noisy": np.zeros(n, np.uint8), "t_s": t,
     }

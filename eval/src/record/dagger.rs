@@ -77,10 +77,13 @@ impl Policy {
     }
 }
 
-/// What the expert commanded in the last cycle and whether the learner's command was used.
+/// What the expert commanded in the last cycle, what it steered towards and whether the
+/// learner's command was used.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Label {
     pub expert: Control,
+    /// The expert's [`Controller::target`], when it has one.
+    pub target: Option<Control>,
     pub learner_drove: bool,
 }
 
@@ -133,13 +136,56 @@ impl Controller for Mixed {
         };
         *self.label.lock().unwrap_or_else(PoisonError::into_inner) = Some(Label {
             expert: expert.clamped(),
+            target: self.expert.target().map(Control::clamped),
             learner_drove,
         });
         Ok(out)
     }
 
+    fn target(&self) -> Option<Control> {
+        self.expert.target()
+    }
+
     fn reset(&mut self) {
         self.expert.reset();
         self.learner.reset();
+    }
+}
+
+/// The expert alone (no learner), leaving what it said in a [`LabelCell`] like [`Mixed`] does,
+/// so that the recorder reads its target the same way in both kinds of episode.
+pub struct Watched {
+    expert: Box<dyn Controller>,
+    label: LabelCell,
+}
+
+impl Watched {
+    #[must_use]
+    pub fn new(expert: Box<dyn Controller>, label: LabelCell) -> Self {
+        Self { expert, label }
+    }
+}
+
+impl Controller for Watched {
+    fn kind(&self) -> ControllerKind {
+        self.expert.kind()
+    }
+
+    fn control(&mut self, input: &ControlInput<'_>) -> Result<Control, ControllerError> {
+        let expert = self.expert.control(input)?;
+        *self.label.lock().unwrap_or_else(PoisonError::into_inner) = Some(Label {
+            expert: expert.clamped(),
+            target: self.expert.target().map(Control::clamped),
+            learner_drove: false,
+        });
+        Ok(expert)
+    }
+
+    fn target(&self) -> Option<Control> {
+        self.expert.target()
+    }
+
+    fn reset(&mut self) {
+        self.expert.reset();
     }
 }

@@ -22,7 +22,7 @@ use sim::Command;
 
 use robot_agent::controllers::intention_net::preprocess::resize_area_rgb8;
 
-use super::dagger::{LabelCell, Mixed};
+use super::dagger::{LabelCell, Mixed, Watched};
 use crate::table::run::{Cycle, CycleObserver, CycleOutcome};
 use crate::table::TableError;
 
@@ -37,6 +37,10 @@ pub struct Sample {
     pub dlm: u8,
     /// The expert's command, normalised: (v, ω) / limits, in [-1, 1].
     pub label: [f32; 2],
+    /// What the expert steered towards before its command filter
+    /// ([`Controller::target`]), normalised the same way; `label` on cycles where the
+    /// supervisor, not the expert, decided (its own stops).
+    pub target: [f32; 2],
     /// What the robot executed, normalised the same way (≠ `label` under noise).
     pub executed: [f32; 2],
     /// True pose (x m, y m, yaw rad).
@@ -109,6 +113,8 @@ pub struct Recorder<'a> {
     pub samples: Vec<Sample>,
     progress: &'a (dyn Fn(u64) + Sync),
     dagger: Option<Dagger>,
+    /// What the expert said in the last cycle (left by [`Mixed`] or [`Watched`]).
+    label: LabelCell,
 }
 
 /// A DAgger episode's learner, until the run asks for the controller, and the mixture's draws.
@@ -116,7 +122,6 @@ struct Dagger {
     learner: Option<Box<dyn Controller>>,
     beta: f64,
     seed: u64,
-    label: LabelCell,
 }
 
 impl<'a> Recorder<'a> {
@@ -143,6 +148,7 @@ impl<'a> Recorder<'a> {
             samples: Vec::new(),
             progress,
             dagger: None,
+            label: LabelCell::default(),
         }
     }
 
@@ -154,7 +160,6 @@ impl<'a> Recorder<'a> {
             learner: Some(learner),
             beta,
             seed,
-            label: LabelCell::default(),
         });
         self
     }
@@ -200,7 +205,7 @@ impl CycleObserver for Recorder<'_> {
         expert: Box<dyn Controller>,
     ) -> Result<Box<dyn Controller>, TableError> {
         let Some(d) = self.dagger.as_mut() else {
-            return Ok(expert);
+            return Ok(Box::new(Watched::new(expert, self.label.clone())));
         };
         let learner = d.learner.take().ok_or(TableError::Setup {
             what: "learner",
@@ -211,7 +216,7 @@ impl CycleObserver for Recorder<'_> {
             learner,
             d.beta,
             d.seed,
-            d.label.clone(),
+            self.label.clone(),
         )))
     }
 
@@ -225,14 +230,16 @@ impl CycleObserver for Recorder<'_> {
         }
         let d = cycle.decision;
         let decided = Control::from_physical(d.cmd_v_mps, d.cmd_omega_radps, &self.limits);
-        let (label, learner_drove) = match &self.dagger {
-            Some(dagger) if d.state == AgentState::Driving => dagger
-                .label
-                .lock()
-                .unwrap_or_else(PoisonError::into_inner)
-                .map_or((decided, false), |l| (l.expert, l.learner_drove)),
+        let said = if d.state == AgentState::Driving {
+            *self.label.lock().unwrap_or_else(PoisonError::into_inner)
+        } else {
+            None
+        };
+        let (label, learner_drove) = match (&self.dagger, said) {
+            (Some(_), Some(l)) => (l.expert, l.learner_drove),
             _ => (decided, false),
         };
+        let target = said.and_then(|l| l.target).unwrap_or(label);
         let offset_radps = self
             .noise
             .as_mut()
@@ -258,6 +265,7 @@ impl CycleObserver for Recorder<'_> {
                 // Dlm::index is 0..4.
                 dlm: dlm.index() as u8,
                 label: control_f32(label),
+                target: control_f32(target),
                 executed: control_f32(Control::from_physical(
                     cmd.v_mps,
                     cmd.omega_radps,
