@@ -45,3 +45,4 @@ fi
 "$PY" training/tests/test_init_camera.py
 "$PY" training/tests/test_export_drive.py
 "$PY" training/tests/test_recard.py
+"$PY" training/tests/test_setoff_plot.py
