@@ -151,7 +151,6 @@ class Pool:
                     shard[name] = np.array(shard[name])
         self.dlm = np.concatenate([ds.field("dlm") for ds in self.sets]).astype(np.int64)
         self.label = np.concatenate([ds.field("label") for ds in self.sets]).astype(np.float32)
-        self.speed_label = speed_label
         if speed_label == "target":
             missing = [str(ds.root) for ds in self.sets if "target" not in ds.fields]
             if missing:

@@ -71,7 +71,7 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help="balanced sampling by DLM class and |omega| bin (default on; paper off)")
     p.add_argument("--balance-speed", action=argparse.BooleanOptionalAction, default=None,
                    help="also split the balancing cells by slow/moving speed label (default off)")
-    p.add_argument("--speed-label", choices=data.SPEED_LABELS, default=None,
+    p.add_argument("--speed-label", choices=data.SPEED_LABELS, default="command",
                    help="speed label: the expert's command (default) or the target speed its filter steers towards "
                         "(recordings with a 'target' field); the turn rate is always the command's")
     p.add_argument("--augment", action=argparse.BooleanOptionalAction, default=None,
@@ -276,17 +276,16 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
 
     preload = () if not args.preload else (("camera", "lpe") if args.kind == "lpe" else ("camera",))
-    speed_label = args.speed_label or "command"
-    pool = data.Pool(args.data, preload=preload, speed_label=speed_label)
+    pool = data.Pool(args.data, preload=preload, speed_label=args.speed_label)
     train_idx, val_idx, val_keys = data.split_by_episode(pool, args.val_fraction, args.seed)
     r = recipe.resolve(args.preset, {
         "loss": args.loss, "optimizer": args.optimizer, "lr": args.lr, "weight_decay": args.weight_decay,
         "batch": args.batch, "schedule": args.schedule, "samples_per_epoch": args.samples_per_epoch,
         "balance": args.balance, "balance_speed": args.balance_speed, "augment": args.augment, "randomize_intention": args.randomize_intention,
     })
-    if speed_label != "command":
+    if args.speed_label != "command":
         # Only when not the default, so older recipes read as they did.
-        r["speed_label"] = speed_label
+        r["speed_label"] = args.speed_label
     if r["samples_per_epoch"] is None:
         r["samples_per_epoch"] = int(len(train_idx))
     if args.kind != "dlm":

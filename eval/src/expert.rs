@@ -836,8 +836,6 @@ pub struct Expert {
     search: Search,
     motion: Motion,
     last_target: (f64, f64),
-    /// `last_target` normalised by the limits it was chosen under ([`Controller::target`]).
-    target: Control,
     rotating: bool,
     /// Waiting before a narrow passage for someone coming the other way (last cycle).
     holding: bool,
@@ -949,7 +947,6 @@ impl Expert {
             search: Search::default(),
             motion: Motion::default(),
             last_target: (0.0, 0.0),
-            target: Control::default(),
             rotating: false,
             holding: false,
             pass_side: None,
@@ -1053,7 +1050,6 @@ impl Expert {
     fn drive(&mut self, limits: &Limits, f: &FilterLimits, target: (f64, f64), dt: f64) -> Control {
         self.motion = f.step(self.motion, target.0, target.1, dt);
         self.last_target = target;
-        self.target = Control::from_physical(target.0, target.1, limits);
         Control::from_physical(self.motion.v_mps, self.motion.omega_radps, limits)
     }
 
@@ -2032,14 +2028,13 @@ impl Controller for Expert {
         Ok(control)
     }
 
-    fn target(&self) -> Option<Control> {
-        Some(self.target)
+    fn target(&self) -> Option<(f64, f64)> {
+        Some(self.last_target)
     }
 
     fn reset(&mut self) {
         self.motion = Motion::default();
         self.last_target = (0.0, 0.0);
-        self.target = Control::default();
         self.rotating = false;
         self.holding = false;
         self.pass_side = None;

@@ -82,9 +82,20 @@ impl Policy {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Label {
     pub expert: Control,
-    /// The expert's [`Controller::target`], when it has one.
-    pub target: Option<Control>,
+    /// The expert's [`Controller::target`] (m/s, rad/s), when it has one.
+    pub target: Option<(f64, f64)>,
     pub learner_drove: bool,
+}
+
+impl Label {
+    /// Leaves in `cell` what `expert` said this cycle (its command `said`).
+    fn leave(cell: &LabelCell, expert: &dyn Controller, said: Control, learner_drove: bool) {
+        *cell.lock().unwrap_or_else(PoisonError::into_inner) = Some(Self {
+            expert: said.clamped(),
+            target: expert.target(),
+            learner_drove,
+        });
+    }
 }
 
 /// Shared between [`Mixed`] (inside the supervisor) and the recorder.
@@ -134,15 +145,11 @@ impl Controller for Mixed {
             // A learner that cannot run this cycle (no LPE image yet) leaves it to the expert.
             (_, _) => (expert, false),
         };
-        *self.label.lock().unwrap_or_else(PoisonError::into_inner) = Some(Label {
-            expert: expert.clamped(),
-            target: self.expert.target().map(Control::clamped),
-            learner_drove,
-        });
+        Label::leave(&self.label, self.expert.as_ref(), expert, learner_drove);
         Ok(out)
     }
 
-    fn target(&self) -> Option<Control> {
+    fn target(&self) -> Option<(f64, f64)> {
         self.expert.target()
     }
 
@@ -173,15 +180,11 @@ impl Controller for Watched {
 
     fn control(&mut self, input: &ControlInput<'_>) -> Result<Control, ControllerError> {
         let expert = self.expert.control(input)?;
-        *self.label.lock().unwrap_or_else(PoisonError::into_inner) = Some(Label {
-            expert: expert.clamped(),
-            target: self.expert.target().map(Control::clamped),
-            learner_drove: false,
-        });
+        Label::leave(&self.label, self.expert.as_ref(), expert, false);
         Ok(expert)
     }
 
-    fn target(&self) -> Option<Control> {
+    fn target(&self) -> Option<(f64, f64)> {
         self.expert.target()
     }
 

@@ -239,7 +239,10 @@ impl CycleObserver for Recorder<'_> {
             (Some(_), Some(l)) => (l.expert, l.learner_drove),
             _ => (decided, false),
         };
-        let target = said.and_then(|l| l.target).unwrap_or(label);
+        // `from_physical` clamps to the limits, as `label` is.
+        let target = said
+            .and_then(|l| l.target)
+            .map_or(label, |(v, w)| Control::from_physical(v, w, &self.limits));
         let offset_radps = self
             .noise
             .as_mut()

@@ -127,12 +127,12 @@ pub trait Controller: Send {
     /// [`ControllerError`] when an input is missing or unusable; the agent then stops.
     fn control(&mut self, input: &ControlInput<'_>) -> Result<Control, ControllerError>;
 
-    /// The command the last [`Controller::control`] steered towards before the controller's
-    /// own smoothing (a privileged expert's chosen target speed and turn rate), `None` for a
-    /// controller without one. A recording labels speed with it: the smoothed command is the
-    /// current motion plus a bounded step, which a network that does not see the current
+    /// What the last [`Controller::control`] steered towards before the controller's own
+    /// smoothing, (speed m/s, turn rate rad/s) (a privileged expert's chosen target), `None`
+    /// for a controller without one. A recording labels speed with it: the smoothed command is
+    /// the current motion plus a bounded step, which a network that does not see the current
     /// speed cannot learn to set off from.
-    fn target(&self) -> Option<Control> {
+    fn target(&self) -> Option<(f64, f64)> {
         None
     }
 
