@@ -51,7 +51,7 @@ OMEGA_BINS = (0.1, 0.3, 0.6)
 # have in that view, so from rest (after a turn on the spot) it creeps; the target does not
 # depend on the current speed, and the agent's acceleration limit makes the ramp. The turn
 # rate always stays the command's: its target jumps to the limit on every turn.
-SPEED_LABELS = ("command", "target")
+SPEED_LABELS = ("command", "target", "lead")
 # Normalised speed label below which a frame counts as slow (0.2 of 0.7 m/s: 0.14 m/s).
 SLOW_V = 0.2
 # Limits of the robot agent (robot-agent/src/config.rs Limits::default) for recordings whose
@@ -151,15 +151,21 @@ class Pool:
                     shard[name] = np.array(shard[name])
         self.dlm = np.concatenate([ds.field("dlm") for ds in self.sets]).astype(np.int64)
         self.label = np.concatenate([ds.field("label") for ds in self.sets]).astype(np.float32)
-        if speed_label == "target":
+        if speed_label != "command":
             missing = [str(ds.root) for ds in self.sets if "target" not in ds.fields]
             if missing:
                 raise ValueError(
-                    f"speed_label 'target': {', '.join(missing)} has no 'target' field (recorded before "
+                    f"speed_label {speed_label!r}: {', '.join(missing)} has no 'target' field (recorded before "
                     "`eval record` stored the expert's target); record it again or train with speed_label 'command'"
                 )
             target = np.concatenate([ds.field("target") for ds in self.sets]).astype(np.float32)
-            self.label[:, 0] = target[:, 0]
+            if speed_label == "target":
+                self.label[:, 0] = target[:, 0]
+            else:
+                # "lead": the target where it leads the command (setting off: the filter's first
+                # steps are not a speed to learn), the command where the filter still brakes
+                # towards a lower target (it keeps rolling to a goal the camera cannot place).
+                self.label[:, 0] = np.maximum(target[:, 0], self.label[:, 0])
         self.episode_key = np.concatenate(
             [(np.int64(i) << 32) | ds.field("episode").astype(np.int64) for i, ds in enumerate(self.sets)]
         )

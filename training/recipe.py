@@ -101,6 +101,9 @@ def deviations(recipe: dict, model_config: dict, camera_px: int, lpe_px: int, in
     if recipe.get("speed_label") == "target":
         d.append("speed label: the target speed the expert's command filter steers towards, not its filtered "
                  "command (which from rest is the current motion plus a bounded step); turn rate the command's")
+    if recipe.get("speed_label") == "lead":
+        d.append("speed label: the larger of the expert's target speed and its filtered command (the target on "
+                 "setting off, the command while it brakes); turn rate the command's")
     if recipe["augment"]:
         d.append("photometric augmentation of the camera image (brightness, multiply, contrast, blur, noise, pixel dropout)")
     if kind == "dlm" and recipe["randomize_intention"] > 0:

@@ -72,8 +72,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--balance-speed", action=argparse.BooleanOptionalAction, default=None,
                    help="also split the balancing cells by slow/moving speed label (default off)")
     p.add_argument("--speed-label", choices=data.SPEED_LABELS, default="command",
-                   help="speed label: the expert's command (default) or the target speed its filter steers towards "
-                        "(recordings with a 'target' field); the turn rate is always the command's")
+                   help="speed label: the expert's command (default), the target speed its filter steers towards, or "
+                        "'lead', the larger of the two (recordings with a 'target' field); the turn rate is always "
+                        "the command's")
     p.add_argument("--augment", action=argparse.BooleanOptionalAction, default=None,
                    help="photometric augmentation of the camera image (default on; paper off)")
     p.add_argument("--randomize-intention", type=float,

@@ -7,6 +7,7 @@ test's synthetic recording (4 shards: 250, 250, 250, 30 samples):
 * `@1` is the whole recording;
 * recordings labelled with other DLM parameters are refused together;
 * `speed_label="target"` trains speed on the expert's target and the turn rate on its command,
+  `speed_label="lead"` speed on the larger of target and command,
   and refuses, naming it, a recording without the target field;
 * refused, naming the value: a share of 0, above 1, or not a number.
 
@@ -76,8 +77,16 @@ def check(root: Path) -> None:
     assert np.array_equal(targeted.label[:, 0], whole.field("target")[:, 0])
     assert np.array_equal(targeted.label[:, 1], whole.field("label")[:, 1])
     assert not np.array_equal(targeted.label[:, 0], whole.field("label")[:, 0])
+    # "lead": the larger of the two, so the target at set-offs and the command while braking.
+    lead = data.Pool([str(root)], speed_label="lead")
+    command_v, target_v = whole.field("label")[:, 0], whole.field("target")[:, 0]
+    assert np.array_equal(lead.label[:, 0], np.maximum(command_v, target_v))
+    assert np.array_equal(lead.label[:, 1], whole.field("label")[:, 1])
+    assert not np.array_equal(lead.label[:, 0], command_v)
     from training import recipe
 
+    assert any("larger" in d for d in recipe.deviations(
+        recipe.resolve("default", {"speed_label": "lead"}), {"kind": "dlm"}, 128, 128, [], None))
     r = recipe.resolve("default", {"speed_label": "target"})
     assert any("target speed" in d for d in recipe.deviations(r, {"kind": "lpe"}, 128, 128, [], None))
     older = root.parent / "older"
