@@ -27,6 +27,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import math
+
 import numpy as np
 from tqdm import tqdm
 import torch
@@ -61,6 +63,18 @@ DEFAULT_MAX_TURN_RADPS = 1.2
 # The DLM a recording made before `eval record` wrote `dlm_params` was labelled with (planning
 # DlmParams::curvature(), what DLM-Net r1 was trained on; the default is now heading).
 DEFAULT_DLM_MEASURE = "curvature"
+# DLM parameters the planner gained after recordings wrote `dlm_params`, with the value that
+# means what those recordings had (planning DlmParams: no arriving Stop; once there was one,
+# at any bearing of the goal).
+ADDED_DLM_PARAMS = {"arrive_distance_m": 0.0, "arrive_bearing_rad": math.pi}
+
+
+def recorded_dlm_params(index: dict) -> dict:
+    """The DLM parameters a recording's labels were derived with (its index.json), parameters
+    added to the planner since filled in with the value that means what the recording had."""
+    if "dlm_params" not in index:
+        return {"measure": DEFAULT_DLM_MEASURE}
+    return {**ADDED_DLM_PARAMS, **index["dlm_params"]}
 
 # The planner's default LPE rendering (protocol LpeParams::default()), only for recordings made
 # before `eval record` wrote the rendering into index.json (`lpe_rendering`).
@@ -99,7 +113,7 @@ class Pool:
         self.lpe_rendering = dict(first.index.get("lpe_rendering", DEFAULT_LPE_RENDERING))
         self.limits_from_index = "max_speed_mps" in first.index and "max_turn_radps" in first.index
         self.rendering_from_index = "lpe_rendering" in first.index
-        self.dlm_params = dict(first.index.get("dlm_params", {"measure": DEFAULT_DLM_MEASURE}))
+        self.dlm_params = recorded_dlm_params(first.index)
         self.dlm_measure = self.dlm_params.get("measure", DEFAULT_DLM_MEASURE)
         for ds in self.sets[1:]:
             ix = ds.index
@@ -111,7 +125,7 @@ class Pool:
                 dict(ix.get("lpe_rendering", DEFAULT_LPE_RENDERING)),
             )
             mine = (self.camera_px, self.lpe_px, self.max_speed_mps, self.max_turn_radps, self.lpe_rendering)
-            theirs = dict(ix.get("dlm_params", {"measure": DEFAULT_DLM_MEASURE}))
+            theirs = recorded_dlm_params(ix)
             if theirs.get("measure", DEFAULT_DLM_MEASURE) != self.dlm_measure:
                 raise ValueError(
                     f"{ds.root} has DLM labels of the {theirs.get('measure', DEFAULT_DLM_MEASURE)} measure, "

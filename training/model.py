@@ -159,6 +159,16 @@ class DlmNet(nn.Module):
         self.dropout = nn.Dropout(DROPOUT)
         self.heads = nn.ModuleList(mlp_head(cin) for _ in range(INTENTION_DIM))
 
+    @torch.no_grad()
+    def copy_intention(self, source: int, target: int) -> None:
+        """Makes one-hot index `target` drive as `source` does: its head and its column of the
+        intention embedding become copies of `source`'s. A warm start for an intention the
+        network was never trained on (the arriving `stop` from `go_forward`), which the
+        fine-tune then teaches to differ."""
+        self.heads[target].load_state_dict(self.heads[source].state_dict())
+        weight = self.intention[0].weight
+        weight[:, target] = weight[:, source]
+
     def forward(self, camera: torch.Tensor, intention: torch.Tensor) -> torch.Tensor:
         x = torch.cat([self.camera(camera), self.intention(intention)], dim=1)
         x = self.dropout(x)

@@ -101,11 +101,17 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help="keep every batch norm's running statistics as --init left them (the layers in eval mode "
                         "while training; their scale and shift still learn): a fine-tune then cannot re-estimate "
                         "them on its new data")
+    p.add_argument("--init-stop-from-forward", action="store_true",
+                   help="DLM-Net with --init: the stop intention (head and embedding column) starts as a copy "
+                        "of go_forward's, for recordings with the arriving Stop (dlm.arrive_distance_m) fine-tuned "
+                        "from a network trained without it, whose stop head never saw a sample")
     p.add_argument("--init-camera", help="start the camera backbone only from this checkpoint's camera backbone "
                    "(any kind, the same --backbone), e.g. LPE-Net's for a new DLM-Net; the rest starts fresh")
     args = p.parse_args(argv)
     if args.init and args.init_camera:
         p.error("--init and --init-camera exclude each other (--init already loads the camera)")
+    if args.init_stop_from_forward and not (args.init and args.kind == "dlm"):
+        p.error("--init-stop-from-forward needs --kind dlm and --init")
     if args.freeze_bn and not (args.init or args.init_camera):
         p.error("--freeze-bn needs --init or --init-camera (freshly built batch norms have no statistics to keep)")
     if args.backbone == "resnet50" and args.max_onnx_mb < 200:
@@ -309,6 +315,9 @@ def main(argv=None) -> int:
         net.load_state_dict(init["state_dict"])
         r["init"] = str(Path(args.init).resolve())
         r["init_datasets"] = init.get("card_inputs", {}).get("dataset_id")
+        if args.init_stop_from_forward:
+            net.copy_intention(data.GO_FORWARD, data.DLM_NAMES.index("stop"))
+            r["init_stop_from_forward"] = True
     if args.init_camera:
         r["init_camera"], r["init_datasets"] = load_camera(net, config, args.init_camera)
     net = net.to(device, memory_format=torch.channels_last)
@@ -331,6 +340,8 @@ def main(argv=None) -> int:
     if args.init:
         deviations.append(f"warm-started from the weights of {args.init} (an earlier round, trained on "
                           f"dataset {r['init_datasets']}), as a DAgger round retrains the learner")
+    if args.init_stop_from_forward:
+        deviations.append("the stop intention's head and embedding column warm-started as copies of go_forward's")
     if args.freeze_bn:
         deviations.append("batch norms' running statistics kept at the warm start's while fine-tuning "
                           "(eval mode; their scale and shift still trained)")

@@ -272,6 +272,14 @@ pub struct TableArgs {
     /// measure it was not trained on (to see how it copes, before training on the new one).
     #[arg(long, requires = "dlm_measure")]
     dlm_measure_over_card: bool,
+    /// The planner's `dlm.arrive_distance_m` (m; 0: no arriving `Stop`), over what the
+    /// DLM-Net's card says (a warning when they differ).
+    #[arg(long)]
+    dlm_arrive_m: Option<f64>,
+    /// The planner's `dlm.arrive_bearing_rad` (the arriving `Stop` only while the goal lies
+    /// within this angle of the heading), over what the DLM-Net's card says.
+    #[arg(long)]
+    dlm_arrive_bearing_rad: Option<f64>,
 }
 
 impl TableArgs {
@@ -391,6 +399,16 @@ pub struct RecordArgs {
     /// of a new measure, driven by a network trained on another one, labelled in the new one.
     #[arg(long, requires = "dlm_measure")]
     dlm_measure_over_card: bool,
+    /// The planner's `dlm.arrive_distance_m` (m; 0: no arriving `Stop`), over what the
+    /// `--policy` DLM-Net's card says (a warning when they differ): a DAgger round that
+    /// introduces the arriving `Stop` to a network trained without it. Recorded in
+    /// index.json's `dlm_params`.
+    #[arg(long)]
+    dlm_arrive_m: Option<f64>,
+    /// The planner's `dlm.arrive_bearing_rad` (the arriving `Stop` only while the goal lies
+    /// within this angle of the heading), over what the `--policy` DLM-Net's card says.
+    #[arg(long)]
+    dlm_arrive_bearing_rad: Option<f64>,
     /// Output folder: index.json and shard_NNNNN/*.npy (training/DATASET.md).
     #[arg(long)]
     out: PathBuf,
@@ -444,6 +462,37 @@ fn dlm_params_for(
         ),
         _ => Ok(trained_on),
     }
+}
+
+/// `params` with `arrive_m` and `bearing_rad` (when given) as its `arrive_distance_m` and
+/// `arrive_bearing_rad`, warning when that changes what a card said; the intention
+/// pipeline's validation checks the values.
+fn with_arrive(
+    params: planning::DlmParams,
+    arrive_m: Option<f64>,
+    bearing_rad: Option<f64>,
+) -> planning::DlmParams {
+    let mut out = params;
+    for (given, field, name) in [
+        (arrive_m, &mut out.arrive_distance_m, "--dlm-arrive-m"),
+        (
+            bearing_rad,
+            &mut out.arrive_bearing_rad,
+            "--dlm-arrive-bearing-rad",
+        ),
+    ] {
+        if let Some(value) = given {
+            if value.to_bits() != field.to_bits() {
+                tracing::warn!(
+                    was = *field,
+                    now = value,
+                    "{name} changes the DLM's parameters"
+                );
+            }
+            *field = value;
+        }
+    }
+    out
 }
 
 /// A card's `dlm_params`: valid planner DLM parameters whose measure is the card's
@@ -509,11 +558,15 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
                 record: record_settings(args.record_dir.as_deref(), args.record_camera),
                 ..crate::record::recording_run_options()
             };
-            run.intention.dlm = dlm_params_for(
-                args.dlm_measure,
-                dlm_policy.as_deref(),
-                args.dlm_measure_over_card,
-            )?;
+            run.intention.dlm = with_arrive(
+                dlm_params_for(
+                    args.dlm_measure,
+                    dlm_policy.as_deref(),
+                    args.dlm_measure_over_card,
+                )?,
+                args.dlm_arrive_m,
+                args.dlm_arrive_bearing_rad,
+            );
             run
         },
         command: std::env::args().collect::<Vec<_>>().join(" "),
@@ -673,13 +726,17 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
                 intention.planner.centring.enabled = false;
             }
             intention.seen.enabled = !args.no_seen_obstacles;
-            intention.dlm = dlm_params_for(
-                args.dlm_measure,
-                methods
-                    .contains(&ControllerKind::Dlm)
-                    .then_some(dlm_model.as_path()),
-                args.dlm_measure_over_card,
-            )?;
+            intention.dlm = with_arrive(
+                dlm_params_for(
+                    args.dlm_measure,
+                    methods
+                        .contains(&ControllerKind::Dlm)
+                        .then_some(dlm_model.as_path()),
+                    args.dlm_measure_over_card,
+                )?,
+                args.dlm_arrive_m,
+                args.dlm_arrive_bearing_rad,
+            );
             intention
         },
         ..options

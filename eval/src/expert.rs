@@ -70,7 +70,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 
 use map_core::search::{MinCost, NEIGHBOURS_8};
 use map_core::{DistanceField, GridGeometry, Sources};
-use protocol::{normalize_angle, Dlm, Pose2D};
+use protocol::{normalize_angle, Pose2D};
 use robot_agent::controllers::path_tracker::{pursuit_curvature, to_robot_frame};
 use robot_agent::controllers::{Control, ControlInput, Controller, ControllerError};
 use robot_agent::{ControllerKind, Limits};
@@ -1959,7 +1959,7 @@ impl Controller for Expert {
             });
         }
         self.sync_motion(input);
-        if intention.dlm == Dlm::Stop {
+        if intention.stops() {
             self.detour = None;
             return Ok(self.stop(limits, dt));
         }

@@ -118,6 +118,7 @@ pub fn intention_without_pixels(intention: &protocol::Intention) -> protocol::In
         map: intention.map.clone(),
         path: intention.path.clone(),
         dlm: intention.dlm,
+        arriving: intention.arriving,
         lpe: intention.lpe.as_ref().map(|image| protocol::Image {
             width_px: image.width_px,
             height_px: image.height_px,

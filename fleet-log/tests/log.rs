@@ -94,6 +94,7 @@ fn messages() -> Vec<LogMessage> {
             map: map_ref(),
             path: vec![Pose2D::new(3.0, 4.0, 0.0), Pose2D::new(3.5, 4.0, 0.0)],
             dlm: Dlm::GoForward,
+            arriving: false,
             lpe: None,
         }),
         LogMessage::CmdVel(CmdVel {

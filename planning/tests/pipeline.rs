@@ -869,3 +869,59 @@ fn the_first_turn_measure_turns_round_the_end_of_a_thin_wall() {
     let beyond = Pose2D::new(24.7, 16.0, std::f64::consts::FRAC_PI_2);
     assert_eq!(dlm(DlmMeasure::FirstTurn, beyond), Dlm::GoForward);
 }
+
+/// With `dlm.arrive_distance_m`, a robot walked along its plan on the depot map is told an
+/// arriving `Stop` over its last straight metres (and the intention says so), never farther
+/// out than the arrive distance, and never a rest before the goal is reached.
+#[test]
+fn the_last_straight_metres_before_a_goal_are_an_arriving_stop() {
+    let config = IntentionConfig {
+        dlm: DlmParams {
+            arrive_distance_m: 1.5,
+            ..DlmParams::default()
+        },
+        ..IntentionConfig::default()
+    };
+    let map = Arc::new(PlanningMap::new(test_support::nav2_map("depot"), &config.planner).unwrap());
+    let pairs = sample_pairs(&map, 6, 31, 6.0, "depot").unwrap();
+    let mut pipeline = IntentionPlanner::new(map, config).unwrap();
+    let task = Some(TaskId::new("t-000002").unwrap());
+    let mut arrived = 0;
+    for (k, (start, end)) in pairs.iter().enumerate() {
+        let goals = [Goal::at(end.x_m, end.y_m)];
+        let progress = GoalProgress::new(&goals, 0);
+        let first = match pipeline.answer(&estimate(*start, 0), &progress, false) {
+            Answer::Heading { plan: Ok(p), .. } => p,
+            _ => continue,
+        };
+        let mut arriving_seen = false;
+        let mut d_m = 0.0;
+        while d_m < first.length_m {
+            let robot = along(&first.path, d_m);
+            let seq = 1 + (d_m * 10.0) as u64 + 1000 * k as u64;
+            let pose = estimate(robot, seq);
+            let Answer::Heading { plan: Ok(p), .. } = pipeline.answer(&pose, &progress, false)
+            else {
+                break;
+            };
+            let left_m = planning::intention::path_left_m(&p.path, robot);
+            let i = p.intention(Header::new(seq, seq), &pose, task.clone(), 0, false);
+            assert_eq!(i.arriving, p.arriving);
+            if p.arriving {
+                assert_eq!(p.dlm, Dlm::Stop);
+                assert!(left_m <= 1.5 + 1e-6, "arriving {left_m} m before the goal");
+                assert!(!i.rests(), "an arriving Stop is driven");
+                arriving_seen = true;
+            } else if p.dlm == Dlm::Stop {
+                assert!(left_m <= 0.3 + 1e-6, "a rest {left_m} m before the goal");
+            }
+            d_m += 0.1;
+        }
+        arrived += usize::from(arriving_seen);
+    }
+    assert!(
+        arrived >= 4,
+        "only {arrived} of {} routes arrived",
+        pairs.len()
+    );
+}

@@ -520,11 +520,30 @@ pub struct Intention {
     /// Planned path in the map frame, from the robot towards the goal.
     pub path: Vec<Pose2D>,
     pub dlm: Dlm,
+    /// The goal is within the planner's `dlm.arrive_distance_m` and no turn is left before
+    /// it: `dlm` is [`Dlm::Stop`], the network's "arriving" input, but the robot drives on to
+    /// the goal (the planner moves to the next goal within its tolerance). A `Stop` that is
+    /// not arriving means rest. Absent (false) from planners without an arrive distance.
+    #[serde(default)]
+    pub arriving: bool,
     /// Local path and environment image (224x224 RGB in DESIGN §4), when the planner renders one.
     pub lpe: Option<Image>,
 }
 
 impl Intention {
+    /// Whether the robot is to rest: no task, or a `Stop` that is not [`Intention::arriving`].
+    #[must_use]
+    pub fn rests(&self) -> bool {
+        self.task_id.is_none() || (self.dlm == Dlm::Stop && !self.arriving)
+    }
+
+    /// Whether the robot is to come to a stop where it is: a `Stop` that is not
+    /// [`Intention::arriving`].
+    #[must_use]
+    pub fn stops(&self) -> bool {
+        self.dlm == Dlm::Stop && !self.arriving
+    }
+
     pub fn validate(&self) -> Result<(), ValidationError> {
         for pose in &self.path {
             pose.validate("path")?;

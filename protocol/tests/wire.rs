@@ -120,6 +120,7 @@ fn intention(lpe: Option<Image>) -> Intention {
             })
             .collect(),
         dlm: Dlm::TurnLeft,
+        arriving: false,
         lpe,
     }
 }
@@ -293,6 +294,7 @@ fn every_status_and_task_state_round_trips() {
     for dlm in Dlm::ALL {
         round_trip(&Intention {
             dlm,
+            arriving: false,
             task_id: None,
             ..intention(None)
         });
@@ -372,6 +374,34 @@ fn intention_round_trips_with_and_without_lpe() {
         .to_rgb8();
     assert_eq!(decoded.dimensions(), (224, 224));
     assert_eq!(decoded.get_pixel(112, 200), &image::Rgb([255, 0, 0]));
+}
+
+#[test]
+fn an_arriving_stop_drives_and_a_plain_stop_rests() {
+    let arriving = Intention {
+        dlm: Dlm::Stop,
+        arriving: true,
+        ..intention(None)
+    };
+    assert!(!arriving.rests() && !arriving.stops());
+    let back: Intention = decode(&round_trip(&arriving)).unwrap();
+    assert!(back.arriving);
+    let stop = Intention {
+        arriving: false,
+        ..arriving.clone()
+    };
+    assert!(stop.rests() && stop.stops());
+    let no_task = Intention {
+        task_id: None,
+        dlm: Dlm::GoForward,
+        ..stop.clone()
+    };
+    assert!(no_task.rests() && !no_task.stops());
+    // A planner from before the field: no `arriving` on the wire reads as false.
+    let mut json = serde_json::to_value(&stop).unwrap();
+    json.as_object_mut().unwrap().remove("arriving");
+    let old: Intention = serde_json::from_value(json).unwrap();
+    assert!(!old.arriving && old.rests());
 }
 
 #[test]

@@ -33,8 +33,8 @@ use fleet_log::{LogMessage, Recorder};
 use map_core::OccupancyGrid;
 use protocol::keys::{self, RobotTopic};
 use protocol::{
-    AgentState, AgentStatus, CameraFrame, CmdVel, Dlm, Header, Intention, LaserScan, MapGrid,
-    MapRef, Odometry, Pose2D, PoseEstimate, RobotId, StopReason,
+    AgentState, AgentStatus, CameraFrame, CmdVel, Header, Intention, LaserScan, MapGrid, MapRef,
+    Odometry, Pose2D, PoseEstimate, RobotId, StopReason,
 };
 use zenoh::handlers::RingChannel;
 use zenoh::Session;
@@ -724,7 +724,7 @@ impl Supervisor {
                 age_ms: u64::try_from(age.as_millis()).unwrap_or(u64::MAX),
             });
         }
-        if intention.task_id.is_none() || intention.dlm == Dlm::Stop {
+        if intention.rests() {
             // Nothing to do, or the goal is reached: rest, which is not a fault.
             return (None, AgentState::Idle, None);
         }

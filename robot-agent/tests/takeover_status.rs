@@ -145,6 +145,7 @@ impl Run {
                 map: self.map.clone(),
                 path: self.path[nearest..].to_vec(),
                 dlm: Dlm::GoForward,
+                arriving: false,
                 lpe: None,
             };
             self.supervisor.on_intention(intention).unwrap();

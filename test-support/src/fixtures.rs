@@ -25,6 +25,7 @@ pub fn intention(path: Vec<Pose2D>, dlm: Dlm) -> Intention {
         map: map_ref("test"),
         path,
         dlm,
+        arriving: false,
         lpe: None,
     }
 }

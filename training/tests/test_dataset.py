@@ -71,6 +71,21 @@ def check(root: Path) -> None:
         assert "turn_release_rad" in str(e) and "labelled alike" in str(e), e
     else:
         raise AssertionError("recordings of two DLM parameter sets were pooled")
+    # A parameter the planner gained later (the arrive distance) pools at the value meaning
+    # "as before", and not at another.
+    for name, arrive in (("c", 0.0), ("d", 1.5)):
+        copy = root.parent / name
+        shutil.copytree(root.parent / "a", copy)
+        index = json.loads((copy / "index.json").read_text())
+        index["dlm_params"]["arrive_distance_m"] = arrive
+        (copy / "index.json").write_text(json.dumps(index))
+    assert len(data.Pool([str(root.parent / "a"), str(root.parent / "c")])) == 2 * 780
+    try:
+        data.Pool([str(root.parent / "c"), str(root.parent / "d")])
+    except ValueError as e:
+        assert "arrive_distance_m" in str(e), e
+    else:
+        raise AssertionError("recordings of two arrive distances were pooled")
 
     # Speed from the expert's target, turn rate from its command.
     targeted = data.Pool([str(root)], speed_label="target")

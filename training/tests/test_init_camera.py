@@ -1,4 +1,5 @@
-"""Test of `train.py --init-camera`: a new network's camera backbone from another kind's checkpoint.
+"""Tests of `train.py --init-camera` (a new network's camera backbone from another kind's
+checkpoint) and `--init-stop-from-forward`.
 
 * a DLM-Net (small-spatial) gets exactly the camera weights (and batch-norm statistics) of an
   LPE-Net checkpoint of the same backbone; its intention layer and heads keep their own fresh
@@ -78,5 +79,25 @@ def test_init_camera() -> None:
     print("train.py --init-camera: ok")
 
 
+def test_init_stop_from_forward() -> None:
+    """`--init-stop-from-forward`: after `copy_intention(go_forward, stop)` the stop one-hot
+    drives exactly as go_forward does, the turns as before."""
+    torch.manual_seed(5)
+    net = model.build({"kind": "dlm", "backbone": "small", "lpe_branch": "light"}).eval()
+    x = torch.rand(2, 3, 96, 96, generator=torch.Generator().manual_seed(6))
+    hot = torch.eye(4)
+
+    def drive(i: int) -> torch.Tensor:
+        return net(x, hot[i].expand(2, 4))
+
+    left, forward = drive(0), drive(2)
+    assert not torch.allclose(drive(3), forward)
+    net.copy_intention(2, 3)
+    torch.testing.assert_close(drive(3), forward)
+    torch.testing.assert_close(drive(0), left)
+    print("train.py --init-stop-from-forward: ok")
+
+
 if __name__ == "__main__":
     test_init_camera()
+    test_init_stop_from_forward()

@@ -850,7 +850,7 @@ function renderPanel() {
   setText(
     q('sel-intention'),
     i
-      ? `${DLM_GLYPH[i.dlm] || ''} ${String(i.dlm).replaceAll('_', ' ')} · goal ${Number(i.goal_index) + 1} · ${(i.path || []).length} path points${i.latency_ms !== undefined && i.latency_ms !== null ? ` · ${Number(i.latency_ms).toFixed(1)} ms` : ''}`
+      ? `${DLM_GLYPH[i.dlm] || ''} ${String(i.dlm).replaceAll('_', ' ')}${i.arriving ? ' (arriving)' : ''} · goal ${Number(i.goal_index) + 1} · ${(i.path || []).length} path points${i.latency_ms !== undefined && i.latency_ms !== null ? ` · ${Number(i.latency_ms).toFixed(1)} ms` : ''}`
       : '—',
   );
   setText(q('sel-last-seen'), ago(robot.last_seen_ns));

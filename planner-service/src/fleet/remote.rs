@@ -568,6 +568,7 @@ mod tests {
             task_id: Some(TaskId::new("t1").unwrap()),
             goal_index: 1,
             dlm: Dlm::TurnLeft,
+            arriving: false,
             path: vec![Pose2D::new(1.0, 2.0, 0.5)],
             stamp_ns: 7,
             latency_ms: 3.5,

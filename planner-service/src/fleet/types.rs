@@ -307,6 +307,9 @@ pub struct IntentionView {
     pub task_id: Option<TaskId>,
     pub goal_index: u32,
     pub dlm: Dlm,
+    /// `dlm` is an arriving `Stop`: the robot drives on to its goal ([`Intention::arriving`]).
+    #[serde(default)]
+    pub arriving: bool,
     pub path: Vec<Pose2D>,
     pub stamp_ns: u64,
     /// From the pose arriving at the service to the intention leaving it.
@@ -321,6 +324,7 @@ impl IntentionView {
             task_id: intention.task_id.clone(),
             goal_index: intention.goal_index,
             dlm: intention.dlm,
+            arriving: intention.arriving,
             path: intention.path.clone(),
             stamp_ns: intention.header.stamp_ns,
             latency_ms: 0.0,

@@ -122,6 +122,19 @@ pub struct DlmParams {
     pub turn_release_rad: f64,
     /// `Stop` when the path left to drive is at most this long.
     pub stop_distance_m: f64,
+    /// `Stop` too, but *arriving* ([`protocol::Intention::arriving`]: the robot drives on to
+    /// the goal), when the path left is at most this long and longer than `stop_distance_m`,
+    /// and the measure says `GoForward` (a turn still ahead stays a turn). 0 (the default, as
+    /// before DLM-Net a1): never. The one-hot `go_forward` cannot tell a camera-driven network
+    /// that its goal is near, so it either rolls past goals or stops short of those in front
+    /// of a wall (docs/evaluation.md, round 45).
+    pub arrive_distance_m: f64,
+    /// Within `arrive_distance_m`: the arriving `Stop` only while the goal lies within this
+    /// angle of the robot's heading; farther off, `TurnLeft`/`TurnRight` towards it (held down
+    /// to half the angle). A `stop` one-hot does not say which way the goal lies, and a
+    /// network told it drives the last metres straight (round 46). π (the default): any
+    /// bearing, as DLM-Net a1 was trained on.
+    pub arrive_bearing_rad: f64,
 }
 
 impl Default for DlmParams {
@@ -139,6 +152,8 @@ impl Default for DlmParams {
             turn_threshold_rad: 0.8,
             turn_release_rad: 0.6,
             stop_distance_m: 0.3,
+            arrive_distance_m: 0.0,
+            arrive_bearing_rad: std::f64::consts::PI,
         }
     }
 }
@@ -185,6 +200,8 @@ impl DlmParams {
             ("turn_threshold_rad", self.turn_threshold_rad),
             ("turn_release_rad", self.turn_release_rad),
             ("stop_distance_m", self.stop_distance_m),
+            ("arrive_distance_m", self.arrive_distance_m),
+            ("arrive_bearing_rad", self.arrive_bearing_rad),
         ] {
             if !value.is_finite() || value < 0.0 {
                 return Err(DlmParamsError {
@@ -211,6 +228,13 @@ impl DlmParams {
                 field: "turn_release_rad",
                 value: self.turn_release_rad,
                 reason: "must be at most turn_threshold_rad",
+            });
+        }
+        if self.arrive_bearing_rad > std::f64::consts::PI {
+            return Err(DlmParamsError {
+                field: "arrive_bearing_rad",
+                value: self.arrive_bearing_rad,
+                reason: "must be at most pi",
             });
         }
         if self.turn_threshold_rad > std::f64::consts::PI {
@@ -323,10 +347,67 @@ pub fn next_dlm_along(
         return Dlm::Stop;
     };
     let rest = &path[closest..];
-    let to_end = path.last().map_or(0.0, |g| g.distance_m(&robot));
-    if length_of(rest).max(to_end) <= params.stop_distance_m {
+    let left_m = path_left_m(path, robot);
+    if left_m <= params.stop_distance_m {
         return Dlm::Stop;
     }
+    let measured = measured_move(rest, route, robot, params, previous);
+    if measured == Dlm::GoForward && left_m <= params.arrive_distance_m {
+        return arrive_move(path, robot, params, previous);
+    }
+    measured
+}
+
+/// The move inside the arrive distance where the measure says `GoForward`: the arriving
+/// `Stop` while the goal (the path's end) lies within `arrive_bearing_rad` of the heading, else
+/// a turn towards it, held while it stays at least half that angle off on its side.
+fn arrive_move(path: &[Pose2D], robot: Pose2D, params: &DlmParams, previous: Option<Dlm>) -> Dlm {
+    let Some(goal) = path.last() else {
+        return Dlm::Stop;
+    };
+    let bearing_rad = protocol::normalize_angle(
+        (goal.y_m - robot.y_m).atan2(goal.x_m - robot.x_m) - robot.yaw_rad,
+    );
+    let release_rad = 0.5 * params.arrive_bearing_rad;
+    match previous {
+        Some(Dlm::TurnLeft) if bearing_rad >= release_rad => Dlm::TurnLeft,
+        Some(Dlm::TurnRight) if bearing_rad <= -release_rad => Dlm::TurnRight,
+        _ if bearing_rad.abs() <= params.arrive_bearing_rad => Dlm::Stop,
+        _ if bearing_rad > 0.0 => Dlm::TurnLeft,
+        _ => Dlm::TurnRight,
+    }
+}
+
+/// How much of `path` a robot at `robot` has left to drive: the path's length from the point
+/// closest to the robot, or the straight distance to its end when that is longer; 0 for an
+/// empty path.
+#[must_use]
+pub fn path_left_m(path: &[Pose2D], robot: Pose2D) -> f64 {
+    let Some(closest) = crate::path::nearest_index(path, robot) else {
+        return 0.0;
+    };
+    let to_end = path.last().map_or(0.0, |g| g.distance_m(&robot));
+    length_of(&path[closest..]).max(to_end)
+}
+
+/// Whether `dlm`, answered to a robot at `robot` on `path`, is an arriving `Stop` (see
+/// [`DlmParams::arrive_distance_m`]) rather than one to rest on.
+#[must_use]
+pub fn is_arriving(dlm: Dlm, path: &[Pose2D], robot: Pose2D, params: &DlmParams) -> bool {
+    dlm == Dlm::Stop
+        && params.arrive_distance_m > params.stop_distance_m
+        && path_left_m(path, robot) > params.stop_distance_m
+}
+
+/// The move the measure calls for on `rest` (the path from the point closest to the robot
+/// on, not empty), before the goal's `Stop`.
+fn measured_move(
+    rest: &[Pose2D],
+    route: Option<&[Pose2D]>,
+    robot: Pose2D,
+    params: &DlmParams,
+    previous: Option<Dlm>,
+) -> Dlm {
     match params.measure {
         DlmMeasure::Curvature => {
             let kappa = curvature_of(rest, robot, params.window_m);
@@ -741,5 +822,87 @@ mod tests {
             ..params()
         };
         assert_eq!(dlm_from_path(&path, far, &tight), Dlm::Stop);
+    }
+
+    #[test]
+    fn arriving_stop_before_the_goal_but_not_before_a_turn() {
+        let arrive = DlmParams {
+            arrive_distance_m: 1.5,
+            ..DlmParams::default()
+        };
+        // 3 m straight, then 1.2 m of a left turn of 0.5 m radius (2.4 rad).
+        let mut path = arc(Pose2D::new(0.0, 0.0, 0.0), 0.0, 3.0, 0.05);
+        let end = *path.last().unwrap();
+        path.extend(arc(end, 2.0, 1.2, 0.05).into_iter().skip(1));
+        let straight = arc(Pose2D::new(0.0, 0.0, 0.0), 0.0, 3.0, 0.05);
+        let at = |p: &[Pose2D], left: usize| p[p.len() - 1 - left];
+        // 1.0 m before a straight path's end: arriving, not resting; 2.0 m: still going.
+        let near = at(&straight, 20);
+        let dlm = next_dlm_along(&straight, Some(&straight), near, &arrive, None);
+        assert_eq!(dlm, Dlm::Stop);
+        assert!(is_arriving(dlm, &straight, near, &arrive));
+        assert_eq!(
+            next_dlm_along(&straight, Some(&straight), at(&straight, 40), &arrive, None),
+            Dlm::GoForward
+        );
+        // Within stop_distance_m the Stop is a rest.
+        let there = at(&straight, 4);
+        let dlm = next_dlm_along(&straight, Some(&straight), there, &arrive, None);
+        assert_eq!(dlm, Dlm::Stop);
+        assert!(!is_arriving(dlm, &straight, there, &arrive));
+        // Where the last 1.2 m turn: the turn, not arriving.
+        let before_turn = at(&path, 24);
+        let route = &path[path.len() - 25..];
+        assert_eq!(
+            next_dlm_along(&path, Some(route), before_turn, &arrive, None),
+            Dlm::TurnLeft
+        );
+        // Without an arrive distance (r5's DLM), 1.0 m before the end is no stop.
+        assert_eq!(
+            next_dlm_along(
+                &straight,
+                Some(&straight),
+                near,
+                &DlmParams::default(),
+                None
+            ),
+            Dlm::GoForward
+        );
+        assert!(!is_arriving(
+            Dlm::Stop,
+            &straight,
+            near,
+            &DlmParams::default()
+        ));
+        // With a bearing limit: 1 m before the end, 0.3 m off to the right of the line and
+        // facing along it, the goal lies 0.29 rad to the left: a turn, held down to 0.1 rad.
+        let aimed = DlmParams {
+            arrive_bearing_rad: 0.2,
+            ..arrive
+        };
+        let off = Pose2D::new(near.x_m, near.y_m - 0.3, 0.0);
+        assert_eq!(
+            next_dlm_along(&straight, Some(&straight), off, &aimed, None),
+            Dlm::TurnLeft
+        );
+        let turned = Pose2D::new(off.x_m, off.y_m, 0.15);
+        assert_eq!(
+            next_dlm_along(
+                &straight,
+                Some(&straight),
+                turned,
+                &aimed,
+                Some(Dlm::TurnLeft)
+            ),
+            Dlm::TurnLeft
+        );
+        assert_eq!(
+            next_dlm_along(&straight, Some(&straight), turned, &aimed, Some(Dlm::Stop)),
+            Dlm::Stop
+        );
+        assert_eq!(
+            next_dlm_along(&straight, Some(&straight), near, &aimed, None),
+            Dlm::Stop
+        );
     }
 }

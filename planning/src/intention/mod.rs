@@ -17,7 +17,10 @@ pub mod route;
 pub mod seen;
 
 pub use avoid::{AvoidParams, Neighbour};
-pub use dlm::{dlm_from_path, dlm_on_map, next_dlm, next_dlm_along, DlmMeasure, DlmParams};
+pub use dlm::{
+    dlm_from_path, dlm_on_map, is_arriving, next_dlm, next_dlm_along, path_left_m, DlmMeasure,
+    DlmParams,
+};
 pub use lpe::{render_lpe, LpeImage, LpeParams};
 pub use pipeline::{
     stop_intention, thin_path, Answer, IntentionConfig, IntentionPlanner, Planned, RefreshJob,

@@ -17,7 +17,7 @@ use crate::error::{Endpoint, PlanError};
 use crate::goals::{Advance, GoalProgress};
 use crate::hybrid_astar::Planner;
 use crate::intention::avoid::{path_clear_of, AvoidParams, Neighbour};
-use crate::intention::dlm::{dlm_on_map, DlmParams};
+use crate::intention::dlm::{dlm_on_map, is_arriving, DlmParams};
 use crate::intention::lpe::{render_lpe, LpeImage, LpeParams};
 use crate::intention::reuse::{KeptPlan, ReuseParams};
 use crate::intention::seen::SeenObstacleParams;
@@ -88,6 +88,8 @@ pub struct Planned {
     /// Length of the full planned path.
     pub length_m: f64,
     pub dlm: Dlm,
+    /// `dlm` is an arriving `Stop` ([`Intention::arriving`]).
+    pub arriving: bool,
     /// Rendered when asked for.
     pub lpe: Option<LpeImage>,
     /// The rest of the previous plan, no new search (see [`ReuseParams`]).
@@ -111,6 +113,7 @@ impl Planned {
         Intention {
             path: self.path.clone(),
             dlm: self.dlm,
+            arriving: self.arriving,
             lpe: self.lpe.as_ref().filter(|_| send_lpe).and_then(wire_image),
             ..stop_intention(header, pose, task_id, goal_index)
         }
@@ -145,6 +148,7 @@ pub fn stop_intention(
         map: pose.map.clone(),
         path: Vec::new(),
         dlm: Dlm::Stop,
+        arriving: false,
         lpe: None,
     }
 }
@@ -483,6 +487,7 @@ impl IntentionPlanner {
             self.last_dlm,
         );
         self.last_dlm = Some(dlm);
+        let arriving = is_arriving(dlm, &poses, robot, &self.config.dlm);
         let lpe = if render_lpe {
             let trail: Vec<Pose2D> = self.trail.iter().copied().collect();
             // The parameters were validated in `new`, the only way rendering can fail.
@@ -495,6 +500,7 @@ impl IntentionPlanner {
             path: thin_path(&poses, self.config.path_spacing_m),
             length_m,
             dlm,
+            arriving,
             lpe,
             reused,
             avoided_robots: self.kept_avoided,

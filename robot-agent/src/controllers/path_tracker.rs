@@ -6,7 +6,7 @@
 //! The module also holds the path geometry (projection onto the path, the look-ahead point) that
 //! the dynamic window controller shares.
 
-use protocol::{Dlm, Pose2D};
+use protocol::Pose2D;
 
 use super::{Control, ControlInput, Controller, ControllerError};
 use crate::config::{ConfigError, ControllerKind, Limits};
@@ -393,7 +393,7 @@ pub(crate) fn checked_task<'a>(
             ),
         });
     }
-    if intention.dlm == Dlm::Stop {
+    if intention.stops() {
         return Ok(None);
     }
     let path = PathRef::new(controller, &intention.path)?;
@@ -412,7 +412,7 @@ pub(crate) fn checked_task<'a>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use protocol::Intention;
+    use protocol::{Dlm, Intention};
 
     pub(crate) fn intention(path: Vec<Pose2D>, dlm: Dlm) -> Intention {
         test_support::fixtures::intention(path, dlm)
@@ -516,6 +516,15 @@ mod tests {
                 .unwrap(),
             Control::default()
         );
+        // An arriving `Stop` is driven on to the goal.
+        let arriving = Intention {
+            arriving: true,
+            ..stop
+        };
+        let cmd = pt
+            .control(&input(Pose2D::default(), 0.5, Some(&arriving), &limits))
+            .unwrap();
+        assert!(cmd.v_norm > 0.0, "{cmd:?}");
         let err = pt
             .control(&input(Pose2D::default(), 0.0, None, &limits))
             .unwrap_err();
