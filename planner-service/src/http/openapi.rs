@@ -218,11 +218,12 @@ fn schemas() -> Value {
             }
         },
         "Intention": {
-            "type": "object", "required": ["task_id", "goal_index", "dlm", "path", "stamp_ns", "latency_ms"],
+            "type": "object", "required": ["task_id", "goal_index", "dlm", "arriving", "path", "stamp_ns", "latency_ms"],
             "properties": {
                 "task_id": { "type": ["string", "null"] },
                 "goal_index": uint,
                 "dlm": { "type": "string", "enum": ["turn_left", "turn_right", "go_forward", "stop"] },
+                "arriving": { "type": "boolean", "description": "dlm is an arriving stop: the robot drives on to its goal" },
                 "path": { "type": "array", "items": r("Pose2D") },
                 "stamp_ns": uint,
                 "latency_ms": num
