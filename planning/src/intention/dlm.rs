@@ -125,7 +125,7 @@ pub struct DlmParams {
     /// `Stop` too, but *arriving* ([`protocol::Intention::arriving`]: the robot drives on to
     /// the goal), when the path left is at most this long and longer than `stop_distance_m`,
     /// and the measure says `GoForward` (a turn still ahead stays a turn). 0 (the default, as
-    /// before DLM-Net a1): never. The one-hot `go_forward` cannot tell a camera-driven network
+    /// before round 46): never. The one-hot `go_forward` cannot tell a camera-driven network
     /// that its goal is near, so it either rolls past goals or stops short of those in front
     /// of a wall (docs/evaluation.md, round 45).
     pub arrive_distance_m: f64,
@@ -133,7 +133,7 @@ pub struct DlmParams {
     /// angle of the robot's heading; farther off, `TurnLeft`/`TurnRight` towards it (held down
     /// to half the angle). A `stop` one-hot does not say which way the goal lies, and a
     /// network told it drives the last metres straight (round 46). π (the default): any
-    /// bearing, as DLM-Net a1 was trained on.
+    /// bearing, as round 46's first fine-tune (a) was trained on.
     pub arrive_bearing_rad: f64,
 }
 
@@ -347,7 +347,7 @@ pub fn next_dlm_along(
         return Dlm::Stop;
     };
     let rest = &path[closest..];
-    let left_m = path_left_m(path, robot);
+    let left_m = left_of(rest, robot);
     if left_m <= params.stop_distance_m {
         return Dlm::Stop;
     }
@@ -383,11 +383,13 @@ fn arrive_move(path: &[Pose2D], robot: Pose2D, params: &DlmParams, previous: Opt
 /// empty path.
 #[must_use]
 pub fn path_left_m(path: &[Pose2D], robot: Pose2D) -> f64 {
-    let Some(closest) = crate::path::nearest_index(path, robot) else {
-        return 0.0;
-    };
-    let to_end = path.last().map_or(0.0, |g| g.distance_m(&robot));
-    length_of(&path[closest..]).max(to_end)
+    crate::path::nearest_index(path, robot).map_or(0.0, |closest| left_of(&path[closest..], robot))
+}
+
+/// [`path_left_m`] for `rest`, the path from the point closest to the robot on.
+fn left_of(rest: &[Pose2D], robot: Pose2D) -> f64 {
+    let to_end = rest.last().map_or(0.0, |g| g.distance_m(&robot));
+    length_of(rest).max(to_end)
 }
 
 /// Whether `dlm`, answered to a robot at `robot` on `path`, is an arriving `Stop` (see
