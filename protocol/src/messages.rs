@@ -534,7 +534,7 @@ impl Intention {
     /// Whether the robot is to rest: no task, or a `Stop` that is not [`Intention::arriving`].
     #[must_use]
     pub fn rests(&self) -> bool {
-        self.task_id.is_none() || (self.dlm == Dlm::Stop && !self.arriving)
+        self.task_id.is_none() || self.stops()
     }
 
     /// Whether the robot is to come to a stop where it is: a `Stop` that is not
