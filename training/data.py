@@ -54,6 +54,14 @@ OMEGA_BINS = (0.1, 0.3, 0.6)
 # depend on the current speed, and the agent's acceleration limit makes the ramp. The turn
 # rate always stays the command's: its target jumps to the limit on every turn.
 SPEED_LABELS = ("command", "target", "lead")
+# What a sample's turn-rate label is: the expert's command, or ("lead") its target where the
+# robot stands or crawls (command speed below SLOW_V) and the target turns the same way harder.
+# In a DAgger round the expert's filter restarts from the measured motion when the learner's
+# turn rate is more than 0.25 rad/s off its own, so where the learner stood facing a wall the
+# label is the learner's own standstill plus one bounded step: a learner that froze learns to
+# creep round at 0.05 rad/s (round 48: DLM-Net c4 alone stalled so at task D's room exit and
+# task E's goal 3). Moving, target and command agree (|difference| > 0.3 on 2-4 % of frames).
+TURN_LABELS = ("command", "lead")
 # Normalised speed label below which a frame counts as slow (0.2 of 0.7 m/s: 0.14 m/s).
 SLOW_V = 0.2
 # Limits of the robot agent (robot-agent/src/config.rs Limits::default) for recordings whose
@@ -92,6 +100,14 @@ DEFAULT_LPE_RENDERING = {
 }
 
 
+def turn_leads(command: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Where the "lead" turn label takes the expert's target turn rate (rows of normalised
+    (v, omega)): the command's speed below SLOW_V and the target turning the same way as the
+    command (or the command not turning), harder."""
+    same_way = np.sign(target[:, 1]) * np.sign(command[:, 1]) >= 0
+    return (np.abs(command[:, 0]) < SLOW_V) & same_way & (np.abs(target[:, 1]) > np.abs(command[:, 1]))
+
+
 class Pool:
     """All samples of one or more recordings, globally indexed in the order given.
 
@@ -99,11 +115,14 @@ class Pool:
     one of each). Episode keys are (recording, episode) so equal episode numbers of different
     recordings stay different episodes."""
 
-    def __init__(self, dirs: list[str | Path], preload: tuple[str, ...] = (), speed_label: str = "command"):
+    def __init__(self, dirs: list[str | Path], preload: tuple[str, ...] = (), speed_label: str = "command",
+                 turn_label: str = "command"):
         if not dirs:
             raise ValueError("no dataset folder given")
         if speed_label not in SPEED_LABELS:
             raise ValueError(f"speed_label {speed_label!r} is not one of {SPEED_LABELS}")
+        if turn_label not in TURN_LABELS:
+            raise ValueError(f"turn_label {turn_label!r} is not one of {TURN_LABELS}")
         self.sets = [dataset.load(d) for d in dirs]
         first = self.sets[0]
         self.camera_px = tuple(first.index["fields"]["camera"]["shape"][:2])
@@ -165,21 +184,25 @@ class Pool:
                     shard[name] = np.array(shard[name])
         self.dlm = np.concatenate([ds.field("dlm") for ds in self.sets]).astype(np.int64)
         self.label = np.concatenate([ds.field("label") for ds in self.sets]).astype(np.float32)
-        if speed_label != "command":
+        if speed_label != "command" or turn_label != "command":
+            which = f"speed_label {speed_label!r}" if speed_label != "command" else f"turn_label {turn_label!r}"
             missing = [str(ds.root) for ds in self.sets if "target" not in ds.fields]
             if missing:
                 raise ValueError(
-                    f"speed_label {speed_label!r}: {', '.join(missing)} has no 'target' field (recorded before "
-                    "`eval record` stored the expert's target); record it again or train with speed_label 'command'"
+                    f"{which}: {', '.join(missing)} has no 'target' field (recorded before "
+                    "`eval record` stored the expert's target); record it again or train with the command's labels"
                 )
             target = np.concatenate([ds.field("target") for ds in self.sets]).astype(np.float32)
+            command = self.label.copy()
             if speed_label == "target":
                 self.label[:, 0] = target[:, 0]
-            else:
+            elif speed_label == "lead":
                 # "lead": the target where it leads the command (setting off: the filter's first
                 # steps are not a speed to learn), the command where the filter still brakes
                 # towards a lower target (it keeps rolling to a goal the camera cannot place).
                 self.label[:, 0] = np.maximum(target[:, 0], self.label[:, 0])
+            if turn_label == "lead":
+                self.label[:, 1] = np.where(turn_leads(command, target), target[:, 1], command[:, 1])
         self.episode_key = np.concatenate(
             [(np.int64(i) << 32) | ds.field("episode").astype(np.int64) for i, ds in enumerate(self.sets)]
         )

@@ -73,8 +73,10 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help="also split the balancing cells by slow/moving speed label (default off)")
     p.add_argument("--speed-label", choices=data.SPEED_LABELS, default="command",
                    help="speed label: the expert's command (default), the target speed its filter steers towards, or "
-                        "'lead', the larger of the two (recordings with a 'target' field); the turn rate is always "
-                        "the command's")
+                        "'lead', the larger of the two (recordings with a 'target' field); the turn rate: --turn-label")
+    p.add_argument("--turn-label", choices=data.TURN_LABELS, default="command",
+                   help="turn-rate label: the expert's command (default), or 'lead', its target where the robot "
+                        "stands or crawls and the target turns the same way harder (recordings with a 'target' field)")
     p.add_argument("--augment", action=argparse.BooleanOptionalAction, default=None,
                    help="photometric augmentation of the camera image (default on; paper off)")
     p.add_argument("--randomize-intention", type=float,
@@ -283,7 +285,7 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
 
     preload = () if not args.preload else (("camera", "lpe") if args.kind == "lpe" else ("camera",))
-    pool = data.Pool(args.data, preload=preload, speed_label=args.speed_label)
+    pool = data.Pool(args.data, preload=preload, speed_label=args.speed_label, turn_label=args.turn_label)
     train_idx, val_idx, val_keys = data.split_by_episode(pool, args.val_fraction, args.seed)
     r = recipe.resolve(args.preset, {
         "loss": args.loss, "optimizer": args.optimizer, "lr": args.lr, "weight_decay": args.weight_decay,
@@ -293,6 +295,8 @@ def main(argv=None) -> int:
     if args.speed_label != "command":
         # Only when not the default, so older recipes read as they did.
         r["speed_label"] = args.speed_label
+    if args.turn_label != "command":
+        r["turn_label"] = args.turn_label
     if r["samples_per_epoch"] is None:
         r["samples_per_epoch"] = int(len(train_idx))
     if args.kind != "dlm":

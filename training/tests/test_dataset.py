@@ -98,11 +98,30 @@ def check(root: Path) -> None:
     assert np.array_equal(lead.label[:, 0], np.maximum(command_v, target_v))
     assert np.array_equal(lead.label[:, 1], whole.field("label")[:, 1])
     assert not np.array_equal(lead.label[:, 0], command_v)
+    # Turn rate "lead": the target where the robot stands or crawls and the target turns the
+    # same way harder, the command everywhere else; the speed label is left as asked.
+    turned = data.Pool([str(root)], speed_label="target", turn_label="lead")
+    command, target = whole.field("label"), whole.field("target")
+    assert np.array_equal(turned.label[:, 0], target[:, 0])
+    took = turned.label[:, 1] != command[:, 1]
+    assert took.any(), "no frame of the fixture recording takes the target turn rate"
+    assert np.array_equal(turned.label[took, 1], target[took, 1])
+    assert np.all(np.abs(command[took, 0]) < data.SLOW_V)
+    assert np.all(np.abs(target[took, 1]) > np.abs(command[took, 1]))
+    assert np.all(np.sign(target[took, 1]) * np.sign(command[took, 1]) >= 0)
+    moving = np.abs(command[:, 0]) >= data.SLOW_V
+    assert np.array_equal(turned.label[moving, 1], command[moving, 1])
+    only_turn = data.Pool([str(root)], turn_label="lead")
+    assert np.array_equal(only_turn.label[:, 0], command[:, 0])
+    assert np.array_equal(only_turn.label[:, 1], turned.label[:, 1])
     from training import recipe
 
     assert any("larger" in d for d in recipe.deviations(
         recipe.resolve("default", {"speed_label": "lead"}), {"kind": "dlm"}, 128, 128, [], None))
     r = recipe.resolve("default", {"speed_label": "target"})
+    both = {**r, "turn_label": "lead"}
+    said = recipe.deviations(both, {"kind": "dlm"}, 128, 128, [], None)
+    assert any("turn-rate label" in d for d in said) and not any("turn rate the command's" in d for d in said), said
     assert any("target speed" in d for d in recipe.deviations(r, {"kind": "lpe"}, 128, 128, [], None))
     older = root.parent / "older"
     shutil.copytree(root, older)
@@ -115,6 +134,18 @@ def check(root: Path) -> None:
         assert "'target'" in str(e) and str(older) in str(e), e
     else:
         raise AssertionError("a recording without targets trained on targets")
+    try:
+        data.Pool([str(root), str(older)], turn_label="lead")
+    except ValueError as e:
+        assert "turn_label 'lead'" in str(e) and str(older) in str(e), e
+    else:
+        raise AssertionError("a recording without targets trained its turn rate on targets")
+    try:
+        data.Pool([str(root)], turn_label="target")
+    except ValueError as e:
+        assert "'target'" in str(e) and "turn_label" in str(e), e
+    else:
+        raise AssertionError("an unknown turn label was accepted")
     try:
         data.Pool([str(root)], speed_label="goal")
     except ValueError as e:
