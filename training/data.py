@@ -52,15 +52,17 @@ OMEGA_BINS = (0.1, 0.3, 0.6)
 # see the current speed learns from the command a mean over the speeds the robot happened to
 # have in that view, so from rest (after a turn on the spot) it creeps; the target does not
 # depend on the current speed, and the agent's acceleration limit makes the ramp. The turn
-# rate always stays the command's: its target jumps to the limit on every turn.
+# rate stays the command's (TURN_LABELS for where not): its target jumps to the limit on every
+# turn.
 SPEED_LABELS = ("command", "target", "lead")
 # What a sample's turn-rate label is: the expert's command, or ("lead") its target where the
 # robot stands or crawls (command speed below SLOW_V) and the target turns the same way harder.
 # In a DAgger round the expert's filter restarts from the measured motion when the learner's
 # turn rate is more than 0.25 rad/s off its own, so where the learner stood facing a wall the
-# label is the learner's own standstill plus one bounded step: a learner that froze learns to
-# creep round at 0.05 rad/s (round 48: DLM-Net c4 alone stalled so at task D's room exit and
-# task E's goal 3). Moving, target and command agree (|difference| > 0.3 on 2-4 % of frames).
+# label is the learner's own standstill plus one bounded step, which a network that sees no
+# motion may learn as a creep (round 48: DLM-Net c4 alone stood or turned at 0.03-0.09 rad/s
+# at task D's room exit and task E's goal 3; a fine-tune with "lead" did not beat c4 there).
+# Moving, target and command agree (|difference| > 0.3 on 2-4 % of frames).
 TURN_LABELS = ("command", "lead")
 # Normalised speed label below which a frame counts as slow (0.2 of 0.7 m/s: 0.14 m/s).
 SLOW_V = 0.2
