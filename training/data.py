@@ -195,7 +195,10 @@ class Pool:
                     "`eval record` stored the expert's target); record it again or train with the command's labels"
                 )
             target = np.concatenate([ds.field("target") for ds in self.sets]).astype(np.float32)
-            command = self.label.copy()
+            if turn_label == "lead":
+                # Before the speed label changes: the rule reads the command's speed.
+                leads = turn_leads(self.label, target)
+                self.label[leads, 1] = target[leads, 1]
             if speed_label == "target":
                 self.label[:, 0] = target[:, 0]
             elif speed_label == "lead":
@@ -203,8 +206,6 @@ class Pool:
                 # steps are not a speed to learn), the command where the filter still brakes
                 # towards a lower target (it keeps rolling to a goal the camera cannot place).
                 self.label[:, 0] = np.maximum(target[:, 0], self.label[:, 0])
-            if turn_label == "lead":
-                self.label[:, 1] = np.where(turn_leads(command, target), target[:, 1], command[:, 1])
         self.episode_key = np.concatenate(
             [(np.int64(i) << 32) | ds.field("episode").astype(np.int64) for i, ds in enumerate(self.sets)]
         )

@@ -30,6 +30,15 @@ from training import data, dataset  # noqa: E402
 from test_smoke import write_synthetic  # noqa: E402
 
 
+def refused(call, why: str) -> str:
+    """The message of the ValueError that `call()` raises; fails with `why` when it raises none."""
+    try:
+        call()
+    except ValueError as e:
+        return str(e)
+    raise AssertionError(why)
+
+
 def check(root: Path) -> None:
     whole = dataset.load(root)
     assert len(whole) == 780 and len(whole.index["shards"]) == 4, len(whole)
@@ -65,12 +74,11 @@ def check(root: Path) -> None:
         index["dlm_params"] = {**params, "turn_release_rad": release}
         (copy / "index.json").write_text(json.dumps(index))
     assert len(data.Pool([str(root.parent / "a"), f"{root.parent / 'a'}@0.5"])) == 1060
-    try:
-        data.Pool([str(root.parent / "a"), str(root.parent / "b")])
-    except ValueError as e:
-        assert "turn_release_rad" in str(e) and "labelled alike" in str(e), e
-    else:
-        raise AssertionError("recordings of two DLM parameter sets were pooled")
+    e = refused(
+        lambda: data.Pool([str(root.parent / "a"), str(root.parent / "b")]),
+        "recordings of two DLM parameter sets were pooled",
+    )
+    assert "turn_release_rad" in e and "labelled alike" in e, e
     # A parameter the planner gained later (the arrive distance) pools at the value meaning
     # "as before", and not at another.
     for name, arrive in (("c", 0.0), ("d", 1.5)):
@@ -80,12 +88,11 @@ def check(root: Path) -> None:
         index["dlm_params"]["arrive_distance_m"] = arrive
         (copy / "index.json").write_text(json.dumps(index))
     assert len(data.Pool([str(root.parent / "a"), str(root.parent / "c")])) == 2 * 780
-    try:
-        data.Pool([str(root.parent / "c"), str(root.parent / "d")])
-    except ValueError as e:
-        assert "arrive_distance_m" in str(e), e
-    else:
-        raise AssertionError("recordings of two arrive distances were pooled")
+    e = refused(
+        lambda: data.Pool([str(root.parent / "c"), str(root.parent / "d")]),
+        "recordings of two arrive distances were pooled",
+    )
+    assert "arrive_distance_m" in e, e
 
     # Speed from the expert's target, turn rate from its command.
     targeted = data.Pool([str(root)], speed_label="target")
@@ -128,38 +135,24 @@ def check(root: Path) -> None:
     index = json.loads((older / "index.json").read_text())
     del index["fields"]["target"]
     (older / "index.json").write_text(json.dumps(index))
-    try:
-        data.Pool([str(root), str(older)], speed_label="target")
-    except ValueError as e:
-        assert "'target'" in str(e) and str(older) in str(e), e
-    else:
-        raise AssertionError("a recording without targets trained on targets")
-    try:
-        data.Pool([str(root), str(older)], turn_label="lead")
-    except ValueError as e:
-        assert "turn_label 'lead'" in str(e) and str(older) in str(e), e
-    else:
-        raise AssertionError("a recording without targets trained its turn rate on targets")
-    try:
-        data.Pool([str(root)], turn_label="target")
-    except ValueError as e:
-        assert "'target'" in str(e) and "turn_label" in str(e), e
-    else:
-        raise AssertionError("an unknown turn label was accepted")
-    try:
-        data.Pool([str(root)], speed_label="goal")
-    except ValueError as e:
-        assert "'goal'" in str(e), e
-    else:
-        raise AssertionError("an unknown speed label was accepted")
+    e = refused(
+        lambda: data.Pool([str(root), str(older)], speed_label="target"),
+        "a recording without targets trained on targets",
+    )
+    assert "'target'" in e and str(older) in e, e
+    e = refused(
+        lambda: data.Pool([str(root), str(older)], turn_label="lead"),
+        "a recording without targets trained its turn rate on targets",
+    )
+    assert "turn_label 'lead'" in e and str(older) in e, e
+    e = refused(lambda: data.Pool([str(root)], turn_label="target"), "an unknown turn label was accepted")
+    assert "'target'" in e and "turn_label" in e, e
+    e = refused(lambda: data.Pool([str(root)], speed_label="goal"), "an unknown speed label was accepted")
+    assert "'goal'" in e, e
 
     for bad, says in (("0", "0.0"), ("1.5", "1.5"), ("half", "'half'")):
-        try:
-            dataset.load(f"{root}@{bad}")
-        except ValueError as e:
-            assert says in str(e) and "share" in str(e), e
-        else:
-            raise AssertionError(f"@{bad} was accepted")
+        e = refused(lambda: dataset.load(f"{root}@{bad}"), f"@{bad} was accepted")
+        assert says in e and "share" in e, e
 
 
 def main() -> None:
