@@ -143,10 +143,12 @@ def drive_dlm_with(card: dict[str, str], changes: dict) -> None:
     if card.get("kind") != "dlm":
         raise SystemExit("--drive-dlm-params: only a DLM-Net's card has DLM parameters")
     params = json.loads(card["dlm_params"])
+    # A parameter the planner gained after the card was written reads as its "as before" value.
+    known = {**data.ADDED_DLM_PARAMS, **params}
     for key, value in changes.items():
-        if key not in params or key == "measure":
+        if key not in known or key == "measure":
             raise SystemExit(f"--drive-dlm-params: {key!r} is not a DLM parameter this card can change "
-                             f"(one of {', '.join(k for k in sorted(params) if k != 'measure')})")
+                             f"(one of {', '.join(k for k in sorted(known) if k != 'measure')})")
         # The planner's DlmParams::validate: lengths of a window or chord must be positive, the
         # rest may be 0 (first_turn measuring from the robot on: heading_start_m 0).
         positive = key in ("window_m", "heading_chord_m")

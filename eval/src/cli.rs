@@ -280,6 +280,11 @@ pub struct TableArgs {
     /// within this angle of the heading), over what the DLM-Net's card says.
     #[arg(long)]
     dlm_arrive_bearing_rad: Option<f64>,
+    /// The planner's `dlm.blocked_ahead_m` (m; 0: never): while the floor plan lets the robot
+    /// drive less than this straight ahead, a turn it still needs is told down to
+    /// `dlm.blocked_turn_rad`; over what the DLM-Net's card says.
+    #[arg(long)]
+    dlm_blocked_ahead_m: Option<f64>,
 }
 
 impl TableArgs {
@@ -409,6 +414,10 @@ pub struct RecordArgs {
     /// within this angle of the heading), over what the `--policy` DLM-Net's card says.
     #[arg(long)]
     dlm_arrive_bearing_rad: Option<f64>,
+    /// The planner's `dlm.blocked_ahead_m` (m; 0: never), over what the `--policy` DLM-Net's
+    /// card says; recorded in index.json's `dlm_params`.
+    #[arg(long)]
+    dlm_blocked_ahead_m: Option<f64>,
     /// Output folder: index.json and shard_NNNNN/*.npy (training/DATASET.md).
     #[arg(long)]
     out: PathBuf,
@@ -464,13 +473,14 @@ fn dlm_params_for(
     }
 }
 
-/// `params` with `arrive_m` and `bearing_rad` (when given) as its `arrive_distance_m` and
-/// `arrive_bearing_rad`, warning when that changes what a card said; the intention
-/// pipeline's validation checks the values.
-fn with_arrive(
+/// `params` with `arrive_m`, `bearing_rad` and `blocked_m` (when given) as its
+/// `arrive_distance_m`, `arrive_bearing_rad` and `blocked_ahead_m`, warning when that changes
+/// what a card said; the intention pipeline's validation checks the values.
+fn with_overrides(
     params: planning::DlmParams,
     arrive_m: Option<f64>,
     bearing_rad: Option<f64>,
+    blocked_m: Option<f64>,
 ) -> planning::DlmParams {
     let mut out = params;
     for (given, field, name) in [
@@ -480,6 +490,7 @@ fn with_arrive(
             &mut out.arrive_bearing_rad,
             "--dlm-arrive-bearing-rad",
         ),
+        (blocked_m, &mut out.blocked_ahead_m, "--dlm-blocked-ahead-m"),
     ] {
         if let Some(value) = given {
             if value.to_bits() != field.to_bits() {
@@ -558,7 +569,7 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
                 record: record_settings(args.record_dir.as_deref(), args.record_camera),
                 ..crate::record::recording_run_options()
             };
-            run.intention.dlm = with_arrive(
+            run.intention.dlm = with_overrides(
                 dlm_params_for(
                     args.dlm_measure,
                     dlm_policy.as_deref(),
@@ -566,6 +577,7 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
                 )?,
                 args.dlm_arrive_m,
                 args.dlm_arrive_bearing_rad,
+                args.dlm_blocked_ahead_m,
             );
             run
         },
@@ -726,7 +738,7 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
                 intention.planner.centring.enabled = false;
             }
             intention.seen.enabled = !args.no_seen_obstacles;
-            intention.dlm = with_arrive(
+            intention.dlm = with_overrides(
                 dlm_params_for(
                     args.dlm_measure,
                     methods
@@ -736,6 +748,7 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
                 )?,
                 args.dlm_arrive_m,
                 args.dlm_arrive_bearing_rad,
+                args.dlm_blocked_ahead_m,
             );
             intention
         },

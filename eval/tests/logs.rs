@@ -71,6 +71,44 @@ fn a_recorded_run_replays_to_the_live_estimates() {
     assert_eq!(counts[&Topic::AgentConfig], 1);
     assert_eq!(counts[&Topic::RunSummary], 1);
     assert!(!counts.contains_key(&Topic::Camera));
+    // Who drove: written when it changes, numbered, the dynamic window driving itself.
+    let statuses: Vec<&protocol::AgentStatus> = log
+        .as_recorded()
+        .iter()
+        .filter_map(|e| match &e.message {
+            LogMessage::AgentStatus(s) => Some(s),
+            _ => None,
+        })
+        .collect();
+    assert!(!statuses.is_empty() && statuses.len() < 200, "{counts:?}");
+    assert!(statuses
+        .iter()
+        .enumerate()
+        .all(|(i, s)| s.header.seq == i as u64 + 1
+            && s.controller == ControllerKind::DynamicWindow
+            && !s.recovering));
+    assert!(statuses
+        .iter()
+        .any(|s| s.state == protocol::AgentState::Driving));
+    for pair in statuses.windows(2) {
+        let (a, b) = (pair[0], pair[1]);
+        assert!(
+            (
+                a.state,
+                &a.stop_reason,
+                a.localized,
+                a.rotating_in_place,
+                a.giving_way
+            ) != (
+                b.state,
+                &b.stop_reason,
+                b.localized,
+                b.rotating_in_place,
+                b.giving_way
+            ),
+            "{a:?} repeated"
+        );
+    }
     assert_eq!(
         counts.get(&Topic::InitialPose).copied().unwrap_or(0),
         live.interventions as usize

@@ -3,7 +3,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use protocol::{CmdVel, Intention, LaserScan, Odometry, PoseEstimate};
+use protocol::{AgentStatus, CmdVel, Intention, LaserScan, Odometry, PoseEstimate};
 use serde::de::DeserializeOwned;
 use serde_json::Value;
 
@@ -27,6 +27,7 @@ pub enum LogMessage {
     /// Read back with an empty `lpe.data` (logs keep no LPE pixels).
     Intention(Intention),
     CmdVel(CmdVel),
+    AgentStatus(AgentStatus),
     InitialPose(InitialPose),
     GroundTruth(StampedPose),
     RunSummary(RunSummary),
@@ -44,6 +45,7 @@ impl LogMessage {
             LogMessage::AmclPose(_) => Topic::AmclPose,
             LogMessage::Intention(_) => Topic::Intention,
             LogMessage::CmdVel(_) => Topic::CmdVel,
+            LogMessage::AgentStatus(_) => Topic::AgentStatus,
             LogMessage::InitialPose(_) => Topic::InitialPose,
             LogMessage::GroundTruth(_) => Topic::GroundTruth,
             LogMessage::RunSummary(_) => Topic::RunSummary,
@@ -62,6 +64,7 @@ impl LogMessage {
             LogMessage::AmclPose(m) => m.header.stamp_ns,
             LogMessage::Intention(m) => m.header.stamp_ns,
             LogMessage::CmdVel(m) => m.header.stamp_ns,
+            LogMessage::AgentStatus(m) => m.header.stamp_ns,
             LogMessage::InitialPose(m) => m.header.stamp_ns,
             LogMessage::GroundTruth(m) => m.header.stamp_ns,
             LogMessage::RunSummary(m) => m.stamp_ns,
@@ -166,6 +169,7 @@ impl RunLog {
                 Topic::AmclPose => LogMessage::AmclPose(decode(path, topic, seq, data)?),
                 Topic::Intention => LogMessage::Intention(decode(path, topic, seq, data)?),
                 Topic::CmdVel => LogMessage::CmdVel(decode(path, topic, seq, data)?),
+                Topic::AgentStatus => LogMessage::AgentStatus(decode(path, topic, seq, data)?),
                 Topic::InitialPose => LogMessage::InitialPose(decode(path, topic, seq, data)?),
                 Topic::GroundTruth => LogMessage::GroundTruth(decode(path, topic, seq, data)?),
                 Topic::RunSummary => LogMessage::RunSummary(decode(path, topic, seq, data)?),

@@ -24,13 +24,14 @@ pub enum Topic {
     AmclPose,
     Intention,
     CmdVel,
+    AgentStatus,
     InitialPose,
     GroundTruth,
     RunSummary,
 }
 
 impl Topic {
-    pub const ALL: [Topic; 11] = [
+    pub const ALL: [Topic; 12] = [
         Topic::Map,
         Topic::AgentConfig,
         Topic::Scan,
@@ -39,6 +40,7 @@ impl Topic {
         Topic::AmclPose,
         Topic::Intention,
         Topic::CmdVel,
+        Topic::AgentStatus,
         Topic::InitialPose,
         Topic::GroundTruth,
         Topic::RunSummary,
@@ -56,6 +58,7 @@ impl Topic {
             Topic::AmclPose => "/amcl_pose",
             Topic::Intention => "/intention",
             Topic::CmdVel => "/cmd_vel",
+            Topic::AgentStatus => "/agent_status",
             Topic::InitialPose => "/initialpose",
             Topic::GroundTruth => "/ground_truth",
             Topic::RunSummary => "/run_summary",
@@ -80,6 +83,7 @@ impl Topic {
             Topic::AmclPose => "fleet.PoseEstimate",
             Topic::Intention => "fleet.Intention",
             Topic::CmdVel => "fleet.CmdVel",
+            Topic::AgentStatus => "fleet.AgentStatus",
             Topic::InitialPose => "fleet.InitialPose",
             Topic::GroundTruth => "fleet.StampedPose",
             Topic::RunSummary => "fleet.RunSummary",
@@ -216,6 +220,29 @@ impl Topic {
                     "omega_radps": {"type": "number"}
                 },
                 "required": ["header", "v_mps", "omega_radps"]
+            }),
+            Topic::AgentStatus => json!({
+                "type": "object",
+                "description": "The agent's state, and who drives: the configured controller, or the dynamic window recovering, the rotation shim or the give-way rule in its place",
+                "properties": {
+                    "header": header,
+                    "state": {"type": "string", "enum": ["starting", "idle", "driving", "stopping", "stopped", "relocalizing"]},
+                    "stop_reason": {"oneOf": [{"type": "null"}, {
+                        "type": "object",
+                        "properties": {"kind": {"type": "string", "enum": [
+                            "no_intention", "stale_intention", "localization_lost", "controller_error",
+                            "goal_reached", "collision", "commanded"
+                        ]}},
+                        "required": ["kind"]
+                    }]},
+                    "controller": {"type": "string", "enum": ["dlm", "lpe", "none", "path-tracker", "dynamic-window", "expert"]},
+                    "map": {"oneOf": [{"type": "null"}, map_ref]},
+                    "localized": {"type": "boolean"},
+                    "recovering": {"type": "boolean", "description": "the dynamic window drives in the controller's place"},
+                    "rotating_in_place": {"type": "boolean"},
+                    "giving_way": {"type": "boolean"}
+                },
+                "required": ["header", "state", "stop_reason", "controller", "map", "localized"]
             }),
             Topic::InitialPose => json!({
                 "type": "object",

@@ -5,7 +5,9 @@ use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
-use protocol::{CameraFrame, CmdVel, Header, Intention, LaserScan, Odometry, Pose2D, PoseEstimate};
+use protocol::{
+    AgentStatus, CameraFrame, CmdVel, Header, Intention, LaserScan, Odometry, Pose2D, PoseEstimate,
+};
 use serde::Serialize;
 
 use crate::camera::CompressedImage;
@@ -215,6 +217,14 @@ impl LogWriter {
         self.write_json(Topic::CmdVel, cmd.header.stamp_ns, cmd)
     }
 
+    /// `/agent_status`: the agent's state and who drives.
+    ///
+    /// # Errors
+    /// As [`Self::map`].
+    pub fn agent_status(&mut self, status: &AgentStatus) -> Result<(), LogError> {
+        self.write_json(Topic::AgentStatus, status.header.stamp_ns, status)
+    }
+
     /// `/initialpose`: the filter was re-initialised.
     ///
     /// # Errors
@@ -257,6 +267,7 @@ impl LogWriter {
             LogMessage::AmclPose(m) => self.amcl_pose(m),
             LogMessage::Intention(m) => self.intention(m),
             LogMessage::CmdVel(m) => self.cmd_vel(m),
+            LogMessage::AgentStatus(m) => self.agent_status(m),
             LogMessage::InitialPose(m) => self.initial_pose(m),
             LogMessage::GroundTruth(m) => self.ground_truth(m.header, m.pose),
             LogMessage::RunSummary(m) => self.run_summary(m),

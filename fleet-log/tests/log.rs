@@ -12,8 +12,8 @@ use fleet_log::{
     RunLog, RunSummary, StampedPose, Topic,
 };
 use protocol::{
-    CameraFrame, CmdVel, Dlm, Header, Image, ImageEncoding, Intention, LaserScan, MapName, MapRef,
-    Odometry, Pose2D, PoseEstimate,
+    AgentState, AgentStatus, CameraFrame, CmdVel, ControllerKind, Dlm, Header, Image,
+    ImageEncoding, Intention, LaserScan, MapName, MapRef, Odometry, Pose2D, PoseEstimate,
 };
 
 fn map_ref() -> MapRef {
@@ -102,6 +102,18 @@ fn messages() -> Vec<LogMessage> {
             v_mps: 0.2,
             omega_radps: 0.1,
         }),
+        // The dynamic window drives in the DLM-Net's place.
+        LogMessage::AgentStatus(AgentStatus {
+            header: Header::new(1, 100_000_000),
+            state: AgentState::Driving,
+            stop_reason: None,
+            controller: ControllerKind::Dlm,
+            map: Some(map_ref()),
+            localized: true,
+            recovering: true,
+            rotating_in_place: false,
+            giving_way: false,
+        }),
         // A late odometry reading with an older stamp: read back in time order before the scan.
         LogMessage::Odom(odom(0, 50_000_000)),
         LogMessage::InitialPose(InitialPose {
@@ -167,6 +179,7 @@ fn every_topic_round_trips_in_time_order_with_its_stamp() {
     assert_eq!(log.agent_config().unwrap()["amcl"]["seed"], 7);
     assert_eq!(log.run_summary().unwrap().interventions, 1);
     assert_eq!(log.ground_truth().len(), 1);
+    assert_eq!(counts[&Topic::AgentStatus], 1);
     assert!(log.unknown_topics().is_empty());
 
     // The channels as any MCAP reader sees them: json messages with a jsonschema each.
@@ -184,7 +197,7 @@ fn every_topic_round_trips_in_time_order_with_its_stamp() {
             ),
         );
     }
-    assert_eq!(topics.len(), 10, "{topics:?}");
+    assert_eq!(topics.len(), 11, "{topics:?}");
     assert_eq!(
         topics["/scan"],
         ("json".into(), "jsonschema".into(), "fleet.LaserScan".into())

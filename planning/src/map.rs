@@ -298,6 +298,24 @@ impl PlanningMap {
             .fold(self.clearance_m(x_m, y_m), |c, d| c.min(d.gap_m(x_m, y_m)))
     }
 
+    /// How far a band `half_width_m` either side of the heading of map-frame `p` runs straight
+    /// ahead before an obstacle or unknown cell enters it, up to `max_m`; 0 when one is
+    /// already within `half_width_m` of `p`. Sampled every half cell.
+    #[must_use]
+    pub fn free_ahead_m(&self, p: Pose2D, half_width_m: f64, max_m: f64) -> f64 {
+        let g = self.to_grid(p);
+        let (sin, cos) = g.yaw_rad.sin_cos();
+        let step_m = 0.5 * self.grid.resolution_m();
+        let mut ahead_m = 0.0;
+        while ahead_m < max_m {
+            if self.clearance_m(g.x_m + cos * ahead_m, g.y_m + sin * ahead_m) < half_width_m {
+                return ahead_m;
+            }
+            ahead_m += step_m;
+        }
+        max_m
+    }
+
     /// Whether a robot centred at this grid-frame point is collision-free.
     #[inline]
     #[must_use]
@@ -420,5 +438,25 @@ mod tests {
         // A line into the wall at x = 3.5 m (robot radius 0.25 m) collides.
         assert!(!map.curve_free(2.5, 0.05, |s| (1.0 + s, 1.5)));
         assert!(map.is_free(3.18, 1.5) && !map.is_free(3.32, 1.5));
+    }
+
+    #[test]
+    fn free_ahead_runs_to_the_band_touching_a_wall() {
+        let mut g = OccupancyGrid::filled(100, 60, 0.05, Pose2D::new(0.0, 0.0, 0.0), FREE).unwrap();
+        for y in 0..60 {
+            g.set(70, y, OCCUPIED);
+        }
+        let map = PlanningMap::new(g, &PlannerConfig::default()).unwrap();
+        // The wall's cells start at x = 3.5 m; a band 0.15 m wide each side meets it 0.15 m
+        // before, 2.35 m from x = 1 (to within the field's cell, 0.05 m, on either side).
+        let east = map.free_ahead_m(Pose2D::new(1.0, 1.5, 0.0), 0.15, 5.0);
+        assert!((east - 2.35).abs() <= 0.1, "{east}");
+        // Capped at the distance asked for.
+        assert!((map.free_ahead_m(Pose2D::new(1.0, 1.5, 0.0), 0.15, 1.0) - 1.0).abs() < 1e-9);
+        // Obliquely, the band meets it later: 2.35 m / cos(0.5).
+        let oblique = map.free_ahead_m(Pose2D::new(1.0, 0.5, 0.5), 0.15, 5.0);
+        assert!((oblique - 2.35 / 0.5_f64.cos()).abs() <= 0.15, "{oblique}");
+        // Within the band's width already: nothing ahead is free.
+        assert!(map.free_ahead_m(Pose2D::new(3.4, 1.5, 0.0), 0.15, 5.0) < 1e-9);
     }
 }

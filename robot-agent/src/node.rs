@@ -1301,7 +1301,9 @@ async fn run_in_session(
                     || takeover != published_takeover
                 {
                     status_seq += 1;
-                    protocol::zenoh_io::publish(&status_pub, &agent.status(status_seq, clock.stamp_ns(now))).await?;
+                    let status = agent.status(status_seq, clock.stamp_ns(now));
+                    protocol::zenoh_io::publish(&status_pub, &status).await?;
+                    record(recorder, || LogMessage::AgentStatus(status));
                     published = (decision.state, decision.stop_reason);
                     published_recovering = decision.recovering;
                     published_takeover = takeover;

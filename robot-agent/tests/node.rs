@@ -499,6 +499,15 @@ fn check_live_log(path: &Path, published: usize) {
             "{topic}: {counts:?}"
         );
     }
+    // Each change of the status it published (it started, then drove).
+    assert!(
+        counts
+            .get(&fleet_log::Topic::AgentStatus)
+            .copied()
+            .unwrap_or(0)
+            >= 1,
+        "{counts:?}"
+    );
     // Every pose the test's planner got, the log has (the log may hold the last one or two
     // that the planner's subscriber had not taken when it stopped).
     let poses = counts[&fleet_log::Topic::AmclPose];

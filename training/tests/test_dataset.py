@@ -93,6 +93,19 @@ def check(root: Path) -> None:
         "recordings of two arrive distances were pooled",
     )
     assert "arrive_distance_m" in e, e
+    # So does round 49's turn before a wall (blocked_ahead_m 0: never).
+    for name, blocked in (("e", 0.0), ("f", 1.2)):
+        copy = root.parent / name
+        shutil.copytree(root.parent / "a", copy)
+        index = json.loads((copy / "index.json").read_text())
+        index["dlm_params"].update(blocked_ahead_m=blocked, blocked_turn_rad=0.2)
+        (copy / "index.json").write_text(json.dumps(index))
+    assert len(data.Pool([str(root.parent / "a"), str(root.parent / "e")])) == 2 * 780
+    e = refused(
+        lambda: data.Pool([str(root.parent / "a"), str(root.parent / "f")]),
+        "recordings with and without the turn before a wall were pooled",
+    )
+    assert "blocked_ahead_m" in e, e
 
     # Speed from the expert's target, turn rate from its command.
     targeted = data.Pool([str(root)], speed_label="target")

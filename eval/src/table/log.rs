@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 
 use fleet_log::{InitialPose, LogOptions, LogWriter, MapInfo, RunSummary};
 use protocol::{
-    CameraFrame, CmdVel, ControllerKind, Header, Intention, LaserScan, Odometry, Pose2D,
-    PoseEstimate,
+    AgentStatus, CameraFrame, CmdVel, ControllerKind, Header, Intention, LaserScan, Odometry,
+    Pose2D, PoseEstimate,
 };
 use robot_agent::AgentConfig;
 
@@ -46,6 +46,8 @@ pub(crate) fn safe_chars(name: &str) -> impl Iterator<Item = char> + '_ {
 pub(crate) struct RunRecorder {
     writer: LogWriter,
     cmd_seq: u64,
+    /// The last `/agent_status` written, so only changes are.
+    status: Option<AgentStatus>,
 }
 
 impl RunRecorder {
@@ -84,7 +86,11 @@ impl RunRecorder {
         writer.agent_config(0, agent)?;
         // Where the robot stands before the first step (the trajectory starts here).
         writer.ground_truth(Header::new(0, 0), start)?;
-        Ok(Self { writer, cmd_seq: 0 })
+        Ok(Self {
+            writer,
+            cmd_seq: 0,
+            status: None,
+        })
     }
 
     /// What the agent got this cycle, and the truth at the same instant.
@@ -146,6 +152,31 @@ impl RunRecorder {
             v_mps,
             omega_radps,
         })?)
+    }
+
+    /// `/agent_status` when it differs from the last one written (header aside): who drives
+    /// (the controller, or the recovering dynamic window, the rotation shim, the give-way rule)
+    /// and the agent's state.
+    pub(crate) fn status(&mut self, status: AgentStatus) -> Result<(), TableError> {
+        let unchanged = self.status.as_ref().is_some_and(|last| {
+            AgentStatus {
+                header: status.header,
+                ..last.clone()
+            } == status
+        });
+        if unchanged {
+            return Ok(());
+        }
+        let status = AgentStatus {
+            header: Header::new(
+                self.status.as_ref().map_or(1, |last| last.header.seq + 1),
+                status.header.stamp_ns,
+            ),
+            ..status
+        };
+        self.writer.agent_status(&status)?;
+        self.status = Some(status);
+        Ok(())
     }
 
     /// Ends the log with `/run_summary` and renames it into place.

@@ -709,6 +709,7 @@ pub fn run_with(
             }
         }
         if let Some(r) = recorder.as_mut() {
+            r.status(supervisor.status(0, obs.time_ns))?;
             r.cmd(obs.time_ns, cmd.v_mps, cmd.omega_radps)?;
         }
     }

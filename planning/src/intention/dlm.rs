@@ -135,6 +135,16 @@ pub struct DlmParams {
     /// network told it drives the last metres straight (round 46). π (the default): any
     /// bearing, as round 46's first fine-tune (a) was trained on.
     pub arrive_bearing_rad: f64,
+    /// Both turn angles (`turn_threshold_rad`, `turn_release_rad`) fall to `blocked_turn_rad`
+    /// while the floor plan lets the robot drive less than this straight ahead
+    /// ([`PlanningMap::free_ahead_m`]). A robot that faces a wall or a door's jamb cannot go
+    /// forward, so a turn it still needs is told until it is nearly done; elsewhere the wide
+    /// release stands, which a camera-driven network needs in a maze. 0 (the default, as before
+    /// round 49): never. Round 48 found DLM-Net leaving a room across a corridor, told
+    /// `go_forward` with 0.4 rad still to turn, standing before the jamb opposite.
+    pub blocked_ahead_m: f64,
+    /// The turn angle while blocked (see `blocked_ahead_m`).
+    pub blocked_turn_rad: f64,
 }
 
 impl Default for DlmParams {
@@ -154,6 +164,8 @@ impl Default for DlmParams {
             stop_distance_m: 0.3,
             arrive_distance_m: 0.0,
             arrive_bearing_rad: std::f64::consts::PI,
+            blocked_ahead_m: 0.0,
+            blocked_turn_rad: 0.2,
         }
     }
 }
@@ -202,6 +214,8 @@ impl DlmParams {
             ("stop_distance_m", self.stop_distance_m),
             ("arrive_distance_m", self.arrive_distance_m),
             ("arrive_bearing_rad", self.arrive_bearing_rad),
+            ("blocked_ahead_m", self.blocked_ahead_m),
+            ("blocked_turn_rad", self.blocked_turn_rad),
         ] {
             if !value.is_finite() || value < 0.0 {
                 return Err(DlmParamsError {
@@ -228,6 +242,13 @@ impl DlmParams {
                 field: "turn_release_rad",
                 value: self.turn_release_rad,
                 reason: "must be at most turn_threshold_rad",
+            });
+        }
+        if self.blocked_turn_rad > self.turn_release_rad {
+            return Err(DlmParamsError {
+                field: "blocked_turn_rad",
+                value: self.blocked_turn_rad,
+                reason: "must be at most turn_release_rad",
             });
         }
         if self.arrive_bearing_rad > std::f64::consts::PI {
@@ -330,8 +351,19 @@ pub fn dlm_on_map(
             )
         })
         .flatten();
-    next_dlm_along(path, route.as_deref(), robot, params, previous)
+    let blocked = params.blocked_ahead_m > 0.0
+        && map.free_ahead_m(
+            robot,
+            BAND_OF_RADIUS * map.robot_radius_m(),
+            params.blocked_ahead_m,
+        ) < params.blocked_ahead_m;
+    decide(path, route.as_deref(), robot, params, previous, blocked)
 }
+
+/// The half width of the band [`DlmParams::blocked_ahead_m`] measures, as a share of the
+/// robot's radius: narrower than the robot, so a wall it drives along does not count, and
+/// wide enough for a jamb in front of its camera.
+const BAND_OF_RADIUS: f64 = 0.6;
 
 /// [`next_dlm`] with the floor plan's route from the robot (`route`, from
 /// [`super::route::floor_plan_route`]), which the route measure turns on instead of the path.
@@ -343,6 +375,19 @@ pub fn next_dlm_along(
     params: &DlmParams,
     previous: Option<Dlm>,
 ) -> Dlm {
+    decide(path, route, robot, params, previous, false)
+}
+
+/// [`next_dlm_along`], with the turn angles of a robot `blocked` ahead
+/// ([`DlmParams::blocked_ahead_m`]) when it is.
+fn decide(
+    path: &[Pose2D],
+    route: Option<&[Pose2D]>,
+    robot: Pose2D,
+    params: &DlmParams,
+    previous: Option<Dlm>,
+    blocked: bool,
+) -> Dlm {
     let Some(closest) = crate::path::nearest_index(path, robot) else {
         return Dlm::Stop;
     };
@@ -351,7 +396,7 @@ pub fn next_dlm_along(
     if left_m <= params.stop_distance_m {
         return Dlm::Stop;
     }
-    let measured = measured_move(rest, route, robot, params, previous);
+    let measured = measured_move(rest, route, robot, params, previous, blocked);
     if measured == Dlm::GoForward && left_m <= params.arrive_distance_m {
         return arrive_move(path, robot, params, previous);
     }
@@ -409,7 +454,13 @@ fn measured_move(
     robot: Pose2D,
     params: &DlmParams,
     previous: Option<Dlm>,
+    blocked: bool,
 ) -> Dlm {
+    let (threshold_rad, release_rad) = if blocked {
+        (params.blocked_turn_rad, params.blocked_turn_rad)
+    } else {
+        (params.turn_threshold_rad, params.turn_release_rad)
+    };
     match params.measure {
         DlmMeasure::Curvature => {
             let kappa = curvature_of(rest, robot, params.window_m);
@@ -428,27 +479,29 @@ fn measured_move(
             };
             turn_by(
                 &[heading_ahead_rad(measured, robot, params)],
-                params,
+                threshold_rad,
+                release_rad,
                 previous,
             )
         }
         DlmMeasure::FirstTurn => turn_by(
             &piece_angles_rad(route.unwrap_or(rest), robot, params),
-            params,
+            threshold_rad,
+            release_rad,
             previous,
         ),
     }
 }
 
 /// The turn the measured `angles` (nearest first; one for the heading and route measures)
-/// call for: a turn holds while the first angle at or past `turn_release_rad` is on its side,
-/// and starts on the side of the first angle at or past `turn_threshold_rad`.
-fn turn_by(angles: &[f64], params: &DlmParams, previous: Option<Dlm>) -> Dlm {
+/// call for: a turn holds while the first angle at or past `release_rad` is on its side,
+/// and starts on the side of the first angle at or past `threshold_rad`.
+fn turn_by(angles: &[f64], threshold_rad: f64, release_rad: f64, previous: Option<Dlm>) -> Dlm {
     let first_past = |limit: f64| angles.iter().copied().find(|a| a.abs() >= limit);
-    match (previous, first_past(params.turn_release_rad)) {
+    match (previous, first_past(release_rad)) {
         (Some(Dlm::TurnLeft), Some(a)) if a >= 0.0 => Dlm::TurnLeft,
         (Some(Dlm::TurnRight), Some(a)) if a <= 0.0 => Dlm::TurnRight,
-        _ => match first_past(params.turn_threshold_rad) {
+        _ => match first_past(threshold_rad) {
             Some(a) if a >= 0.0 => Dlm::TurnLeft,
             Some(_) => Dlm::TurnRight,
             None => Dlm::GoForward,
@@ -906,5 +959,63 @@ mod tests {
             next_dlm_along(&straight, Some(&straight), near, &aimed, None),
             Dlm::Stop
         );
+    }
+
+    #[test]
+    fn a_robot_facing_a_wall_is_told_the_turn_it_still_needs() {
+        use crate::config::PlannerConfig;
+        use map_core::{OccupancyGrid, FREE, OCCUPIED};
+        // An L: a corridor east along y 1..3 m, then north along x 8..10 m.
+        let res = 0.05;
+        let (w, h) = (220_u32, 260_u32);
+        let mut cells = vec![OCCUPIED; (w * h) as usize];
+        for y in 0..h {
+            for x in 0..w {
+                let (xm, ym) = (f64::from(x) * res, f64::from(y) * res);
+                if ((0.5..10.0).contains(&xm) && (1.0..3.0).contains(&ym))
+                    || ((8.0..10.0).contains(&xm) && (1.0..12.0).contains(&ym))
+                {
+                    cells[(y * w + x) as usize] = FREE;
+                }
+            }
+        }
+        let grid = OccupancyGrid::new(w, h, res, Pose2D::new(0.0, 0.0, 0.0), cells).unwrap();
+        let map = PlanningMap::new(grid, &PlannerConfig::default()).unwrap();
+        let goal = Pose2D::new(9.0, 11.0, FRAC_PI_2);
+        // In the corner, 0.55 rad right of the way north, so facing the east wall close by.
+        let at = Pose2D::new(9.7, 2.0, 0.0);
+        let route = floor_plan_route(&map, at, goal, 1.0).unwrap();
+        let way_rad = piece_angles_rad(&route, at, &DlmParams::default())[0];
+        let robot = Pose2D::new(at.x_m, at.y_m, way_rad - 0.55);
+        let ahead_m = map.free_ahead_m(robot, BAND_OF_RADIUS * map.robot_radius_m(), 2.0);
+        assert!(ahead_m < 0.9, "{ahead_m}");
+        let path = [robot, goal];
+        let dlm =
+            |params: &DlmParams, previous| dlm_on_map(&map, &path, robot, goal, params, previous);
+        // 0.55 rad is short of the release: forward, turning or not.
+        let open = DlmParams::default();
+        assert_eq!(dlm(&open, None), Dlm::GoForward);
+        assert_eq!(dlm(&open, Some(Dlm::TurnLeft)), Dlm::GoForward);
+        // Blocked within 0.9 m: the turn starts, and holds.
+        let blocked = DlmParams {
+            blocked_ahead_m: 0.9,
+            ..DlmParams::default()
+        };
+        assert_eq!(dlm(&blocked, None), Dlm::TurnLeft);
+        assert_eq!(dlm(&blocked, Some(Dlm::TurnLeft)), Dlm::TurnLeft);
+        // Facing the way north (nothing ahead within 0.9 m): forward again.
+        let turned = Pose2D::new(at.x_m, at.y_m, way_rad - 0.1);
+        assert!(map.free_ahead_m(turned, 0.15, 0.9) >= 0.9);
+        let path = [turned, goal];
+        assert_eq!(
+            dlm_on_map(&map, &path, turned, goal, &blocked, Some(Dlm::TurnLeft)),
+            Dlm::GoForward
+        );
+        // Not wider than the release.
+        let bad = DlmParams {
+            blocked_turn_rad: 0.7,
+            ..blocked
+        };
+        assert_eq!(bad.validate().unwrap_err().field, "blocked_turn_rad");
     }
 }
