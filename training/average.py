@@ -39,6 +39,7 @@ import onnxruntime as ort
 from onnx import numpy_helper
 
 from training import card as card_mod
+from training import data
 from training.card import closed_loop_summary
 from training.export import check_contract
 
@@ -71,6 +72,16 @@ def agent_keys(card: dict[str, str]) -> list[str]:
     keys = [k for k in card_mod.REQUIRED if k not in MERGED]
     keys += [k for k in ("lpe_rendering", "lpe_image_px", "dlm_measure", "dlm_params") if k in card]
     return keys
+
+
+def agent_value(card: dict[str, str], key: str):
+    """What the agent (and the planner) read from `key`: the DLM parameters as parameters, those the
+    planner gained after a card was written at their "as before" value, so a card that spells one
+    out at that value reads as one that does not."""
+    value = card.get(key)
+    if key == "dlm_params" and value is not None:
+        return {**data.ADDED_DLM_PARAMS, **json.loads(value)}
+    return value
 
 
 def same_graph(a: onnx.ModelProto, b: onnx.ModelProto, name_b: str) -> None:
@@ -130,7 +141,7 @@ def average(members: list[tuple[Path, float | None]], out: Path, card_json: Path
     for (path, _), proto, card in zip(members[1:], protos[1:], cards[1:]):
         same_graph(first, proto, str(path))
         for key in agent_keys(first_card):
-            if card.get(key) != first_card.get(key):
+            if agent_value(card, key) != agent_value(first_card, key):
                 raise AverageError(f"average: card key {key} is {card.get(key)!r} in {path}, "
                                    f"{first_card.get(key)!r} in {members[0][0]}")
 

@@ -5,7 +5,9 @@
 * the card: the agent's keys of the first model, the dataset ids joined, the validation losses
   averaged with the weights, every member named with its SHA-256, and it passes the agent's rules;
 * refused, naming what: models of different graphs (LPE-Net and DLM-Net), a card key the agent
-  reads that differs (norm_mean), a negative weight, a missing file; nothing is written then.
+  reads that differs (norm_mean; DLM parameters compared as parameters, so one the planner gained
+  later spelled out at its "as before" value is no difference), a negative weight, a missing file;
+  nothing is written then.
 
 Needs onnx, onnxruntime and torch (training.export's contract check). CI runs it
 (scripts/training-smoke.sh).
@@ -112,6 +114,18 @@ def test_average() -> None:
         _refused([(lpe, 1.0), (scaled, -0.5)], tmp / "r3.onnx", "-0.5")
         _refused([(lpe, 1.0), (scaled, None)], tmp / "r4.onnx", "every --model")
         _refused([(lpe, None), (tmp / "missing.onnx", None)], tmp / "r5.onnx", "missing.onnx")
+        # DLM parameters compare as parameters: one the planner gained later, spelled out at its
+        # "as before" value, is the same; at another value it is not.
+        params = {"measure": "first_turn", "window_m": 1.5, "curvature_threshold_per_m": 0.3, "heading_start_m": 0.0,
+                  "heading_chord_m": 1.0, "turn_threshold_rad": 0.8, "turn_release_rad": 0.6, "stop_distance_m": 0.3}
+        dlm = tmp / "dlm.onnx"
+        _scaled_copy(FIXTURES / "dlm.onnx", dlm, 1.0, {"dlm_params": json.dumps(params)})
+        spelled = tmp / "spelled.onnx"
+        _scaled_copy(dlm, spelled, 1.0, {"dlm_params": json.dumps({**params, "blocked_ahead_m": 0.0})})
+        avg.average([(dlm, None), (spelled, None)], tmp / "dlm-avg.onnx")
+        blocked = tmp / "blocked.onnx"
+        _scaled_copy(dlm, blocked, 1.0, {"dlm_params": json.dumps({**params, "blocked_ahead_m": 1.2})})
+        _refused([(dlm, None), (blocked, None)], tmp / "r6.onnx", "dlm_params")
         assert avg.parse_member("a/b.onnx:0.25") == (Path("a/b.onnx"), 0.25)
         assert avg.parse_member("a/b.onnx") == (Path("a/b.onnx"), None)
     print("training.average: ok")
