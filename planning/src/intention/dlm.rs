@@ -244,7 +244,8 @@ impl DlmParams {
                 reason: "must be at most turn_threshold_rad",
             });
         }
-        if self.blocked_turn_rad > self.turn_release_rad {
+        // Only when on: a release below the default 0.2 must not need the key spelled out.
+        if self.blocked_ahead_m > 0.0 && self.blocked_turn_rad > self.turn_release_rad {
             return Err(DlmParamsError {
                 field: "blocked_turn_rad",
                 value: self.blocked_turn_rad,
@@ -1011,11 +1012,16 @@ mod tests {
             dlm_on_map(&map, &path, turned, goal, &blocked, Some(Dlm::TurnLeft)),
             Dlm::GoForward
         );
-        // Not wider than the release.
+        // Not wider than the release, while on.
         let bad = DlmParams {
             blocked_turn_rad: 0.7,
             ..blocked
         };
         assert_eq!(bad.validate().unwrap_err().field, "blocked_turn_rad");
+        let narrow_release = DlmParams {
+            turn_release_rad: 0.1,
+            ..DlmParams::default()
+        };
+        narrow_release.validate().unwrap();
     }
 }
