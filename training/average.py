@@ -80,7 +80,7 @@ def agent_value(card: dict[str, str], key: str):
     out at that value reads as one that does not."""
     value = card.get(key)
     if key == "dlm_params" and value is not None:
-        return {**data.ADDED_DLM_PARAMS, **json.loads(value)}
+        return data.with_added(json.loads(value))
     return value
 
 

@@ -84,12 +84,18 @@ ADDED_DLM_PARAMS = {
 }
 
 
+def with_added(params: dict) -> dict:
+    """DLM parameters as written (a recording's, a card's), those the planner gained after they
+    were written filled in with the value that means what they had."""
+    return {**ADDED_DLM_PARAMS, **params}
+
+
 def recorded_dlm_params(index: dict) -> dict:
     """The DLM parameters a recording's labels were derived with (its index.json), parameters
-    added to the planner since filled in with the value that means what the recording had."""
+    added to the planner since filled in ([`with_added`])."""
     if "dlm_params" not in index:
         return {"measure": DEFAULT_DLM_MEASURE}
-    return {**ADDED_DLM_PARAMS, **index["dlm_params"]}
+    return with_added(index["dlm_params"])
 
 # The planner's default LPE rendering (protocol LpeParams::default()), only for recordings made
 # before `eval record` wrote the rendering into index.json (`lpe_rendering`).

@@ -144,7 +144,7 @@ def drive_dlm_with(card: dict[str, str], changes: dict) -> None:
         raise SystemExit("--drive-dlm-params: only a DLM-Net's card has DLM parameters")
     params = json.loads(card["dlm_params"])
     # A parameter the planner gained after the card was written reads as its "as before" value.
-    known = {**data.ADDED_DLM_PARAMS, **params}
+    known = data.with_added(params)
     for key, value in changes.items():
         if key not in known or key == "measure":
             raise SystemExit(f"--drive-dlm-params: {key!r} is not a DLM parameter this card can change "

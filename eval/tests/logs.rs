@@ -72,14 +72,7 @@ fn a_recorded_run_replays_to_the_live_estimates() {
     assert_eq!(counts[&Topic::RunSummary], 1);
     assert!(!counts.contains_key(&Topic::Camera));
     // Who drove: written when it changes, numbered, the dynamic window driving itself.
-    let statuses: Vec<&protocol::AgentStatus> = log
-        .as_recorded()
-        .iter()
-        .filter_map(|e| match &e.message {
-            LogMessage::AgentStatus(s) => Some(s),
-            _ => None,
-        })
-        .collect();
+    let statuses = log.agent_statuses();
     assert!(!statuses.is_empty() && statuses.len() < 200, "{counts:?}");
     assert!(statuses
         .iter()

@@ -250,6 +250,19 @@ impl RunLog {
         })
     }
 
+    /// The `/agent_status` records in the order written (each a change of who drives, or of
+    /// the agent's state).
+    #[must_use]
+    pub fn agent_statuses(&self) -> Vec<&AgentStatus> {
+        self.entries
+            .iter()
+            .filter_map(|e| match &e.message {
+                LogMessage::AgentStatus(s) => Some(s),
+                _ => None,
+            })
+            .collect()
+    }
+
     /// The ground truth in time order.
     #[must_use]
     pub fn ground_truth(&self) -> Vec<StampedPose> {

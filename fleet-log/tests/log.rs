@@ -180,6 +180,7 @@ fn every_topic_round_trips_in_time_order_with_its_stamp() {
     assert_eq!(log.run_summary().unwrap().interventions, 1);
     assert_eq!(log.ground_truth().len(), 1);
     assert_eq!(counts[&Topic::AgentStatus], 1);
+    assert!(log.agent_statuses()[0].recovering);
     assert!(log.unknown_topics().is_empty());
 
     // The channels as any MCAP reader sees them: json messages with a jsonschema each.

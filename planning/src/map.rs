@@ -424,13 +424,18 @@ mod tests {
     use super::*;
     use map_core::{FREE, OCCUPIED};
 
-    #[test]
-    fn curve_check_terminates_and_sees_walls() {
+    /// 5 m x 3 m, 5 cm cells, free but for a wall across it whose cells start at x = 3.5 m.
+    fn wall_at_3_5_m() -> PlanningMap {
         let mut g = OccupancyGrid::filled(100, 60, 0.05, Pose2D::new(0.0, 0.0, 0.0), FREE).unwrap();
         for y in 0..60 {
             g.set(70, y, OCCUPIED);
         }
-        let map = PlanningMap::new(g, &PlannerConfig::default()).unwrap();
+        PlanningMap::new(g, &PlannerConfig::default()).unwrap()
+    }
+
+    #[test]
+    fn curve_check_terminates_and_sees_walls() {
+        let map = wall_at_3_5_m();
         // Lengths whose output spacing does not divide evenly, which once stalled the walk.
         for len in [0.2, 0.3, 0.7, 1.1, 0.123_456_7, 1.9] {
             assert!(map.curve_free(len, 0.05, |s| (1.0 + s, 1.5)), "{len}");
@@ -442,11 +447,7 @@ mod tests {
 
     #[test]
     fn free_ahead_runs_to_the_band_touching_a_wall() {
-        let mut g = OccupancyGrid::filled(100, 60, 0.05, Pose2D::new(0.0, 0.0, 0.0), FREE).unwrap();
-        for y in 0..60 {
-            g.set(70, y, OCCUPIED);
-        }
-        let map = PlanningMap::new(g, &PlannerConfig::default()).unwrap();
+        let map = wall_at_3_5_m();
         // The wall's cells start at x = 3.5 m; a band 0.15 m wide each side meets it 0.15 m
         // before, 2.35 m from x = 1 (to within the field's cell, 0.05 m, on either side).
         let east = map.free_ahead_m(Pose2D::new(1.0, 1.5, 0.0), 0.15, 5.0);

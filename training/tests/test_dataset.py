@@ -65,14 +65,19 @@ def check(root: Path) -> None:
     import json
     import shutil
 
+    def relabelled(name: str, src: Path, dlm_params) -> None:
+        """A copy of recording `src` named `name` whose index.json says its labels came from the
+        DLM parameters `dlm_params(its own)` returns."""
+        copy = root.parent / name
+        shutil.copytree(src, copy)
+        index = json.loads((copy / "index.json").read_text())
+        index["dlm_params"] = dlm_params(index.get("dlm_params"))
+        (copy / "index.json").write_text(json.dumps(index))
+
     params = {"measure": "route", "heading_start_m": 1.0, "heading_chord_m": 1.0, "turn_threshold_rad": 0.8,
               "turn_release_rad": 0.6}
     for name, release in (("a", 0.6), ("b", 0.3)):
-        copy = root.parent / name
-        shutil.copytree(root, copy)
-        index = json.loads((copy / "index.json").read_text())
-        index["dlm_params"] = {**params, "turn_release_rad": release}
-        (copy / "index.json").write_text(json.dumps(index))
+        relabelled(name, root, lambda _: {**params, "turn_release_rad": release})
     assert len(data.Pool([str(root.parent / "a"), f"{root.parent / 'a'}@0.5"])) == 1060
     e = refused(
         lambda: data.Pool([str(root.parent / "a"), str(root.parent / "b")]),
@@ -82,11 +87,7 @@ def check(root: Path) -> None:
     # A parameter the planner gained later (the arrive distance) pools at the value meaning
     # "as before", and not at another.
     for name, arrive in (("c", 0.0), ("d", 1.5)):
-        copy = root.parent / name
-        shutil.copytree(root.parent / "a", copy)
-        index = json.loads((copy / "index.json").read_text())
-        index["dlm_params"]["arrive_distance_m"] = arrive
-        (copy / "index.json").write_text(json.dumps(index))
+        relabelled(name, root.parent / "a", lambda p: {**p, "arrive_distance_m": arrive})
     assert len(data.Pool([str(root.parent / "a"), str(root.parent / "c")])) == 2 * 780
     e = refused(
         lambda: data.Pool([str(root.parent / "c"), str(root.parent / "d")]),
@@ -95,11 +96,7 @@ def check(root: Path) -> None:
     assert "arrive_distance_m" in e, e
     # So does round 49's turn before a wall (blocked_ahead_m 0: never).
     for name, blocked in (("e", 0.0), ("f", 1.2)):
-        copy = root.parent / name
-        shutil.copytree(root.parent / "a", copy)
-        index = json.loads((copy / "index.json").read_text())
-        index["dlm_params"].update(blocked_ahead_m=blocked, blocked_turn_rad=0.2)
-        (copy / "index.json").write_text(json.dumps(index))
+        relabelled(name, root.parent / "a", lambda p: {**p, "blocked_ahead_m": blocked, "blocked_turn_rad": 0.2})
     assert len(data.Pool([str(root.parent / "a"), str(root.parent / "e")])) == 2 * 780
     e = refused(
         lambda: data.Pool([str(root.parent / "a"), str(root.parent / "f")]),
