@@ -433,12 +433,16 @@ fn dlm_params_for(
     dlm_model: Option<&std::path::Path>,
     over_card: bool,
 ) -> anyhow::Result<planning::DlmParams> {
+    // A card that names only its measure (or nothing) predates every key added since.
     let with_measure = |measure: DlmMeasure| planning::DlmParams {
         measure,
-        ..planning::DlmParams::default()
+        ..planning::DlmParams::as_before()
     };
     let Some(model) = dlm_model else {
-        return Ok(with_measure(asked.unwrap_or_default()));
+        return Ok(planning::DlmParams {
+            measure: asked.unwrap_or_default(),
+            ..planning::DlmParams::default()
+        });
     };
     let card = robot_agent::controllers::intention_net::read_card(model)
         .with_context(|| format!("reading the card of {}", model.display()))?;
@@ -507,10 +511,26 @@ fn with_overrides(
 }
 
 /// A card's `dlm_params`: valid planner DLM parameters whose measure is the card's
-/// `dlm_measure` (when it has one).
+/// `dlm_measure` (when it has one). A key the card lacks was added to the planner after the
+/// card was written and takes the value that meant "as before"
+/// ([`planning::DlmParams::as_before`]), not the planner's default of today (DLM-Net r5's card
+/// has no `arrive_distance_m`, and was trained without the arriving `Stop`).
 fn card_dlm_params(raw: &str, measure: Option<&str>) -> Result<planning::DlmParams, String> {
-    let params: planning::DlmParams =
+    let mut value: serde_json::Value =
         serde_json::from_str(raw).map_err(|e| format!("bad JSON: {e}"))?;
+    let serde_json::Value::Object(given) = &mut value else {
+        return Err("not a JSON object".into());
+    };
+    let serde_json::Value::Object(before) = serde_json::to_value(planning::DlmParams::as_before())
+        .map_err(|e| format!("the planner's parameters as JSON: {e}"))?
+    else {
+        return Err("the planner's parameters are not a JSON object".into());
+    };
+    for (key, v) in before {
+        given.entry(key).or_insert(v);
+    }
+    let params: planning::DlmParams =
+        serde_json::from_value(value).map_err(|e| format!("bad JSON: {e}"))?;
     params.validate().map_err(|e| e.to_string())?;
     match measure {
         Some(m) if m.trim() != params.measure.as_str() => {
@@ -1118,6 +1138,35 @@ mod tests {
         );
         let missing = test_support::models_dir().join("no-such-model.onnx");
         assert!(dlm_params_for(None, Some(&missing), false).is_err());
+    }
+
+    #[test]
+    fn a_key_a_card_lacks_means_what_it_meant_before_it_was_added() {
+        // DLM-Net r5's card, written before the arriving Stop and the blocked rule.
+        let r5 = r#"{"curvature_threshold_per_m":0.3,"heading_chord_m":1.0,"heading_start_m":0.0,"measure":"first_turn","stop_distance_m":0.3,"turn_release_rad":0.6,"turn_threshold_rad":0.8,"window_m":1.5}"#;
+        let params = card_dlm_params(r5, Some("first_turn")).unwrap();
+        assert_eq!(
+            params,
+            planning::DlmParams {
+                measure: DlmMeasure::FirstTurn,
+                ..planning::DlmParams::as_before()
+            }
+        );
+        assert_ne!(params, planning::DlmParams::default());
+        // A key the card states is kept.
+        let b2 = r#"{"measure":"first_turn","arrive_distance_m":1.5,"arrive_bearing_rad":0.2}"#;
+        let params = card_dlm_params(b2, None).unwrap();
+        assert_eq!(
+            (
+                params.arrive_distance_m,
+                params.arrive_bearing_rad,
+                params.blocked_ahead_m
+            ),
+            (1.5, 0.2, 0.0)
+        );
+        assert!(card_dlm_params("[1, 2]", None)
+            .unwrap_err()
+            .contains("not a JSON object"));
     }
 
     #[test]

@@ -845,7 +845,8 @@ fn the_first_turn_measure_turns_round_the_end_of_a_thin_wall() {
     let map = scenario_map("maze", &config);
     let goal = Pose2D::new(25.0, 17.2, 0.0);
     let dlm = |measure: DlmMeasure, robot: Pose2D| {
-        // The route measure as r4 had it (its chord 1-2 m ahead); first_turn as deployed.
+        // The route measure as r4 had it (its chord 1-2 m ahead); first_turn as r5 drove it
+        // (no arriving Stop: the goal is 1.2 m beyond the wall's end).
         let params = match measure {
             DlmMeasure::Route => DlmParams {
                 measure,
@@ -853,7 +854,7 @@ fn the_first_turn_measure_turns_round_the_end_of_a_thin_wall() {
             },
             _ => DlmParams {
                 measure,
-                ..DlmParams::default()
+                ..DlmParams::as_before()
             },
         };
         let route = planning::intention::floor_plan_route(&map, robot, goal, 2.0).unwrap();

@@ -828,10 +828,21 @@ impl Supervisor {
                 walker_m: crate::recovery::walker_m(self.movers.tracks(), pose),
             });
             self.recovery
+                .oncoming(crate::recovery::oncoming_m(self.movers.tracks(), pose));
+            self.recovery
                 .drive(dt, pose, goal, monitored, unmapped_m, ahead_m)
         } else {
             Mode::Primary
         };
+        if mode == Mode::BackUp {
+            // Straight back the way the robot came; the controller takes it on afresh after.
+            self.recovering = true;
+            if let Some(shim) = &mut self.shim {
+                shim.reset();
+            }
+            let back_mps = self.config.safety.recovery.back_up_speed_mps;
+            return (Some((-back_mps, 0.0)), AgentState::Driving, None);
+        }
         let recovering = mode == Mode::Fallback;
         let controller = match (&mut self.fallback, recovering) {
             (Some(fallback), true) => fallback,

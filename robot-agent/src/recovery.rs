@@ -70,16 +70,28 @@
 //! into the pane (LPE-Net r33, `gen_eval_1000036`, 2026-12-02). A person standing still counts
 //! as anything else the laser sees.
 //!
+//! Met face to face: where someone walked up to the robot from before it, towards it
+//! ([`RecoveryConfig::met_m`], within [`RecoveryConfig::met_s`] before a trigger), the stalled
+//! and cornered triggers back the robot straight off the way it came
+//! ([`RecoveryConfig::back_up_m`] at [`RecoveryConfig::back_up_speed_mps`]; Nav2's BackUp
+//! behaviour) instead of handing it to the dynamic window. In a doorway between glass panes
+//! (task D's bridge, (20, 13)), the person walking through towards the robot and the robot,
+//! which stopped for them in the doorway, stand nose to nose; the dynamic window, blind to the
+//! panes, swung round the person and drove into one (DLM-Net, round 49: 2 glass contacts in 20
+//! runs, both so). Backing off clears the doorway for the person, and the way the robot came is
+//! the one way known to be free of what the laser cannot see. The laser does not see behind the
+//! robot, so the way back is short and slow.
+//!
 //! Plain data in (cycle length, pose, distance to the goal, what the monitor did to the last
 //! command and who walked near, how far the nearest reported obstacle before the robot is, how
-//! far the laser sees ahead), the mode out; the
+//! far the laser sees ahead, how far someone walking towards the robot is), the mode out; the
 //! [`Supervisor`](crate::Supervisor) switches controllers by it.
 
 use protocol::{normalize_angle, LaserScan, Pose2D};
 
 use crate::collision_monitor::Verdict;
 use crate::config::ConfigError;
-use crate::controllers::path_tracker::check_positive;
+use crate::controllers::path_tracker::{check_non_negative, check_positive};
 use crate::movers::{Track, MIN_WALKING_MPS};
 
 /// The `[safety.recovery]` table.
@@ -112,6 +124,15 @@ pub struct RecoveryConfig {
     /// ... a controller that keeps the robot within [`STILL_M`] and [`STILL_RAD`] of one pose
     /// for this long is relieved too.
     pub cornered_stall_s: f64,
+    /// Met face to face: where someone walking towards the robot ([`oncoming_m`]) came this
+    /// close (robot centre to track) before it ...
+    pub met_m: f64,
+    /// ... within this long before the stalled or cornered trigger, the robot backs off ...
+    pub met_s: f64,
+    /// ... this far straight back (0: never; the dynamic window drives round them instead) ...
+    pub back_up_m: f64,
+    /// ... at this speed.
+    pub back_up_speed_mps: f64,
 }
 
 /// How far the robot must move from where it stood to count as moving on, for
@@ -187,6 +208,26 @@ pub fn walker_m(tracks: &[Track], pose: Pose2D) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
+/// How far (robot centre to track centre) the nearest settled track coming towards `pose` at
+/// [`MIN_WALKING_MPS`] or more (its velocity's component towards the robot) is, of those within
+/// [`BESIDE_HALF_ANGLE_RAD`] of its heading (infinite: none), for [`RecoveryConfig::met_m`].
+/// Only coming towards: a robot turning on the spot sweeps a cabinet's returns across cells
+/// the tracker has not seen it in, which makes a body walking round the robot (a generated
+/// building, `gen_eval_1000006`, which backed off from its own first cabinet and stalled).
+#[must_use]
+pub fn oncoming_m(tracks: &[Track], pose: Pose2D) -> f64 {
+    let oncoming: Vec<[f64; 2]> = tracks
+        .iter()
+        .filter(|t| {
+            let (dx, dy) = (pose.x_m - t.x_m, pose.y_m - t.y_m);
+            let d_m = dx.hypot(dy);
+            t.settled() && t.vx_mps * dx + t.vy_mps * dy >= MIN_WALKING_MPS * d_m
+        })
+        .map(|t| [t.x_m, t.y_m])
+        .collect();
+    beside_m(&oncoming, pose)
+}
+
 /// What the collision monitor did to the previous cycle's command, and how far the nearest
 /// person walking was then ([`walker_m`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -226,6 +267,10 @@ impl Default for RecoveryConfig {
             beside_stall_s: 3.0,
             cornered_m: 0.9,
             cornered_stall_s: 3.0,
+            met_m: 1.5,
+            met_s: 5.0,
+            back_up_m: 0.5,
+            back_up_speed_mps: 0.15,
         }
     }
 }
@@ -247,7 +292,11 @@ impl RecoveryConfig {
             ("safety.recovery.beside_stall_s", self.beside_stall_s),
             ("safety.recovery.cornered_m", self.cornered_m),
             ("safety.recovery.cornered_stall_s", self.cornered_stall_s),
-        ])
+            ("safety.recovery.met_m", self.met_m),
+            ("safety.recovery.met_s", self.met_s),
+            ("safety.recovery.back_up_speed_mps", self.back_up_speed_mps),
+        ])?;
+        check_non_negative(&[("safety.recovery.back_up_m", self.back_up_m)])
     }
 }
 
@@ -258,6 +307,9 @@ pub enum Mode {
     Primary,
     /// The dynamic window, recovering.
     Fallback,
+    /// Straight back at [`RecoveryConfig::back_up_speed_mps`], recovering from meeting
+    /// someone face to face.
+    BackUp,
 }
 
 /// The hold timer and the recovery's state (see the module docs).
@@ -267,9 +319,10 @@ pub struct Recovery {
     clock_s: f64,
     /// How long the robot has been held, net of the free cycles since.
     held_s: f64,
-    /// Where and when the dynamic window took over, while it drives.
-    fallback_since: Option<(Pose2D, f64)>,
-    /// How many times the dynamic window took over.
+    /// Who took the robot over ([`Mode::Fallback`] or [`Mode::BackUp`]), where and when, while
+    /// they drive.
+    handed_over: Option<(Mode, Pose2D, f64)>,
+    /// How many times the recovery took over.
     recoveries: u32,
     /// The goal approached, the closest the robot has come to it, and when.
     approach: Option<(Pose2D, f64, f64)>,
@@ -279,6 +332,8 @@ pub struct Recovery {
     posed: Option<(Pose2D, f64)>,
     /// Since when the laser has seen something within `cornered_m` straight ahead.
     blocked_since_s: Option<f64>,
+    /// When someone walking was last within `met_m` before the robot.
+    met_at_s: Option<f64>,
 }
 
 impl Recovery {
@@ -288,16 +343,17 @@ impl Recovery {
             config,
             clock_s: 0.0,
             held_s: 0.0,
-            fallback_since: None,
             recoveries: 0,
             approach: None,
             still: None,
             posed: None,
             blocked_since_s: None,
+            handed_over: None,
+            met_at_s: None,
         }
     }
 
-    /// How many times the dynamic window took over so far.
+    /// How many times the recovery took over so far (the dynamic window, or backing off).
     #[must_use]
     pub fn recoveries(&self) -> u32 {
         self.recoveries
@@ -305,10 +361,14 @@ impl Recovery {
 
     #[must_use]
     pub fn mode(&self) -> Mode {
-        if self.fallback_since.is_some() {
-            Mode::Fallback
-        } else {
-            Mode::Primary
+        self.handed_over.map_or(Mode::Primary, |(mode, ..)| mode)
+    }
+
+    /// How far someone walking towards the robot from before it is this cycle
+    /// ([`oncoming_m`]; infinite: nobody), told before [`Recovery::drive`].
+    pub fn oncoming(&mut self, oncoming_m: f64) {
+        if oncoming_m <= self.config.met_m {
+            self.met_at_s = Some(self.clock_s);
         }
     }
 
@@ -317,7 +377,8 @@ impl Recovery {
     pub fn idle(&mut self, dt_s: f64) {
         self.clock_s += dt_s;
         self.held_s = 0.0;
-        self.fallback_since = None;
+        self.handed_over = None;
+        self.met_at_s = None;
         self.approach = None;
         self.still = None;
         self.posed = None;
@@ -346,13 +407,19 @@ impl Recovery {
         if !c.enabled {
             return Mode::Primary;
         }
-        if let Some((start, since_s)) = self.fallback_since {
-            if pose.distance_m(&start) >= c.release_m || now - since_s >= c.max_s {
-                self.fallback_since = None;
+        if let Some((mode, start, since_s)) = self.handed_over {
+            let (release_m, max_s) = match mode {
+                // Twice the time the way back takes at speed: a robot that cannot back off (a
+                // wall behind, the monitor) gives up and hands back.
+                Mode::BackUp => (c.back_up_m, 2.0 * c.back_up_m / c.back_up_speed_mps + 1.0),
+                Mode::Fallback | Mode::Primary => (c.release_m, c.max_s),
+            };
+            if pose.distance_m(&start) >= release_m || now - since_s >= max_s {
+                self.handed_over = None;
                 self.forget();
                 return Mode::Primary;
             }
-            return Mode::Fallback;
+            return mode;
         }
         self.approach = goal.map(|goal| {
             let goal_m = goal.distance_m(&pose);
@@ -371,15 +438,14 @@ impl Recovery {
             best_m <= c.approach_m && now - since_s >= c.approach_stall_s
         });
         if short_of_goal {
-            self.take_over(pose, now, "short of the goal");
+            self.fall_back(pose, now, "short of the goal");
             return Mode::Fallback;
         }
         // Any heading counts as the same spot here: turning on the spot beside it is no way out.
         let still_s = stood_s(&mut self.still, pose, now, f64::INFINITY);
         let stalled_beside = unmapped_m <= c.beside_m && still_s >= c.beside_stall_s;
         if stalled_beside {
-            self.take_over(pose, now, "stalled beside an obstacle the floor plan lacks");
-            return Mode::Fallback;
+            return self.take_over(pose, now, "stalled beside an obstacle the floor plan lacks");
         }
         let posed_s = stood_s(&mut self.posed, pose, now, STILL_RAD);
         self.blocked_since_s =
@@ -387,8 +453,7 @@ impl Recovery {
         let blocked_s = self.blocked_since_s.map_or(0.0, |since_s| now - since_s);
         let cornered = posed_s.min(blocked_s) >= c.cornered_stall_s;
         if cornered {
-            self.take_over(pose, now, "cornered: standing before something ahead");
-            return Mode::Fallback;
+            return self.take_over(pose, now, "cornered: standing before something ahead");
         }
         let held = monitor.is_some_and(|m| m.held(c.held_speed_mps));
         self.held_s = if held {
@@ -397,7 +462,7 @@ impl Recovery {
             (self.held_s - dt_s).max(0.0)
         };
         if self.held_s >= c.stall_s {
-            self.take_over(pose, now, "held by the collision monitor");
+            self.fall_back(pose, now, "held by the collision monitor");
             return Mode::Fallback;
         }
         Mode::Primary
@@ -412,15 +477,37 @@ impl Recovery {
         self.blocked_since_s = None;
     }
 
-    fn take_over(&mut self, pose: Pose2D, now: f64, why: &str) {
-        self.fallback_since = Some((pose, now));
+    /// A stalled or cornered robot: backs off where it met someone face to face, else the
+    /// dynamic window drives.
+    fn take_over(&mut self, pose: Pose2D, now: f64, why: &str) -> Mode {
+        let c = self.config;
+        let met = self.met_at_s.is_some_and(|at_s| now - at_s <= c.met_s);
+        let mode = if met && c.back_up_m > 0.0 {
+            Mode::BackUp
+        } else {
+            Mode::Fallback
+        };
+        self.hand_over(mode, pose, now, why);
+        mode
+    }
+
+    fn fall_back(&mut self, pose: Pose2D, now: f64, why: &str) {
+        self.hand_over(Mode::Fallback, pose, now, why);
+    }
+
+    fn hand_over(&mut self, mode: Mode, pose: Pose2D, now: f64, why: &str) {
+        self.handed_over = Some((mode, pose, now));
         self.forget();
         self.recoveries += 1;
+        let what = match mode {
+            Mode::BackUp => "met face to face: backs off",
+            Mode::Fallback | Mode::Primary => "the dynamic window takes over",
+        };
         tracing::debug!(
             x_m = pose.x_m,
             y_m = pose.y_m,
             recoveries = self.recoveries,
-            "{why}: the dynamic window takes over"
+            "{why}: {what}"
         );
     }
 }
@@ -867,6 +954,126 @@ mod tests {
     }
 
     #[test]
+    fn met_face_to_face_the_robot_backs_off_the_way_it_came_instead_of_driving_round() {
+        // Task D's glass doorway (round 49): someone walks up to the robot from before it, both
+        // stop, and the person stands 0.55 m before it for 3 s.
+        let mut r = Recovery::new(RecoveryConfig::default());
+        let here = Pose2D::new(19.8, 12.85, 0.0);
+        let mut mode = Mode::Primary;
+        for k in 0..40 {
+            // Walking towards the robot for the first second, then stuck before it.
+            let walker_m = if k < 10 {
+                2.0 - 0.07 * f64::from(k)
+            } else {
+                f64::INFINITY
+            };
+            r.oncoming(walker_m);
+            mode = r.drive(DT, here, FAR_M, None, 0.55, f64::INFINITY);
+            if mode != Mode::Primary {
+                break;
+            }
+        }
+        assert_eq!(mode, Mode::BackUp);
+        assert_eq!(r.recoveries(), 1);
+        // Backing off until 0.5 m back, then the controller again.
+        let mut x_m = here.x_m;
+        let mut cycles = 0;
+        while r.drive(
+            DT,
+            Pose2D::new(x_m, 12.85, 0.0),
+            FAR_M,
+            None,
+            0.55,
+            f64::INFINITY,
+        ) == Mode::BackUp
+        {
+            x_m -= 0.15 * DT;
+            cycles += 1;
+            assert!(cycles < 100, "never handed back");
+        }
+        assert!((33..=35).contains(&cycles), "{cycles}");
+        assert_eq!(r.mode(), Mode::Primary);
+
+        // A robot that cannot back off (a wall behind it) hands back after twice the time.
+        let mut r = Recovery::new(RecoveryConfig::default());
+        r.oncoming(1.0);
+        let n = (0..100)
+            .find(|_| r.drive(DT, here, FAR_M, None, 0.55, f64::INFINITY) == Mode::BackUp)
+            .expect("never backed off");
+        assert!((29..=31).contains(&n), "{n}");
+        let stuck = (0..200)
+            .find(|_| r.drive(DT, here, FAR_M, None, 0.55, f64::INFINITY) != Mode::BackUp)
+            .expect("never handed back");
+        assert!((73..=78).contains(&stuck), "{stuck}");
+
+        // Nobody walked up: a cabinet before the robot gets the dynamic window, as before; so
+        // does someone met longer than met_s before the stall.
+        let mut r = Recovery::new(RecoveryConfig::default());
+        let n = (0..100)
+            .find(|_| r.drive(DT, here, FAR_M, None, 0.55, f64::INFINITY) != Mode::Primary)
+            .expect("never relieved");
+        assert!((29..=31).contains(&n) && r.mode() == Mode::Fallback, "{n}");
+        let mut r = Recovery::new(RecoveryConfig::default());
+        r.oncoming(1.0);
+        for _ in 0..60 {
+            let driving = Pose2D::new(0.0, 0.0, 0.0);
+            assert_eq!(
+                r.drive(DT, driving, FAR_M, None, f64::INFINITY, f64::INFINITY),
+                Mode::Primary
+            );
+        }
+        let n = (0..100)
+            .find(|_| r.drive(DT, here, FAR_M, None, 0.55, f64::INFINITY) != Mode::Primary)
+            .expect("never relieved");
+        assert!((29..=31).contains(&n) && r.mode() == Mode::Fallback, "{n}");
+
+        // back_up_m = 0: the dynamic window, as before the rule.
+        let mut r = Recovery::new(RecoveryConfig {
+            back_up_m: 0.0,
+            ..RecoveryConfig::default()
+        });
+        r.oncoming(1.0);
+        let n = (0..100)
+            .find(|_| r.drive(DT, here, FAR_M, None, 0.55, f64::INFINITY) != Mode::Primary)
+            .expect("never relieved");
+        assert!((29..=31).contains(&n) && r.mode() == Mode::Fallback, "{n}");
+    }
+
+    #[test]
+    fn only_someone_walking_towards_the_robot_from_before_it_is_met() {
+        let track = |x_m: f64, y_m: f64, vx_mps: f64, vy_mps: f64| Track {
+            x_m,
+            y_m,
+            vx_mps,
+            vy_mps,
+            age_s: 1.0,
+            points_m: vec![[x_m, y_m]],
+        };
+        let robot = Pose2D::new(0.0, 0.0, 0.0);
+        // Walking towards the robot 1 m ahead; one behind it coming up, one standing, one
+        // walking away and one crossing 0.6 m ahead (a cabinet swept by a turn looks so) do
+        // not count.
+        let tracks = [
+            track(1.0, 0.0, -0.7, 0.0),
+            track(-0.5, 0.0, 0.7, 0.0),
+            track(0.4, 0.1, -0.05, 0.0),
+            track(0.8, 0.0, 0.7, 0.0),
+            track(0.6, 0.0, 0.0, 0.7),
+        ];
+        assert!((oncoming_m(&tracks, robot) - 1.0).abs() < 1e-9);
+        assert!(oncoming_m(&tracks[1..], robot).is_infinite());
+        // Turned round, the one behind is before it, coming towards it.
+        let back = Pose2D::new(0.0, 0.0, std::f64::consts::PI);
+        assert!((oncoming_m(&tracks, back) - 0.5).abs() < 1e-9);
+        // Not yet followed long enough to have a velocity.
+        let young = Track {
+            age_s: 0.2,
+            ..track(1.0, 0.0, -0.7, 0.0)
+        };
+        assert!(oncoming_m(&[young], robot).is_infinite());
+    }
+
+    #[test]
     fn off_means_off() {
         let mut r = Recovery::new(RecoveryConfig {
             enabled: false,
@@ -906,6 +1113,16 @@ mod tests {
         .validate()
         .unwrap_err();
         assert!(e.to_string().contains("safety.recovery.stall_s = 0"), "{e}");
+        let e = RecoveryConfig {
+            back_up_m: -0.5,
+            ..RecoveryConfig::default()
+        }
+        .validate()
+        .unwrap_err();
+        assert!(
+            e.to_string().contains("safety.recovery.back_up_m = -0.5"),
+            "{e}"
+        );
         let e = RecoveryConfig {
             held_speed_mps: f64::NAN,
             ..RecoveryConfig::default()

@@ -24,8 +24,8 @@
 //!   measure's rule on the floor plan's route from the robot to the goal ([`super::route`])
 //!   instead of on the searched path, so the DLM does not depend on how a search bent (a kept
 //!   plan and a new search from one pose get the same DLM); `Stop` still comes from the path.
-//! - [`DlmMeasure::FirstTurn`] (the default, what the shipped DLM-Net r5 was trained on): the
-//!   first turn on the floor plan's route. The route's first
+//! - [`DlmMeasure::FirstTurn`] (the default, what DLM-Net r5 and the shipped r49 were trained
+//!   on): the first turn on the floor plan's route. The route's first
 //!   `heading_start_m + heading_chord_m` are cut into pieces `heading_chord_m / 2` long, each
 //!   measured against the robot's heading; the first piece whose angle reaches
 //!   `turn_threshold_rad` decides the side, and a turn holds while the first piece at or past
@@ -124,24 +124,25 @@ pub struct DlmParams {
     pub stop_distance_m: f64,
     /// `Stop` too, but *arriving* ([`protocol::Intention::arriving`]: the robot drives on to
     /// the goal), when the path left is at most this long and longer than `stop_distance_m`,
-    /// and the measure says `GoForward` (a turn still ahead stays a turn). 0 (the default, as
-    /// before round 46): never. The one-hot `go_forward` cannot tell a camera-driven network
+    /// and the measure says `GoForward` (a turn still ahead stays a turn). 0: never, what
+    /// DLM-Net r5 was trained on; 1.5 (the default): what the shipped DLM-Net r49 drives on
+    /// (its card's `dlm_params`). The one-hot `go_forward` cannot tell a camera-driven network
     /// that its goal is near, so it either rolls past goals or stops short of those in front
     /// of a wall (docs/evaluation.md, round 45).
     pub arrive_distance_m: f64,
     /// Within `arrive_distance_m`: the arriving `Stop` only while the goal lies within this
     /// angle of the robot's heading; farther off, `TurnLeft`/`TurnRight` towards it (held down
     /// to half the angle). A `stop` one-hot does not say which way the goal lies, and a
-    /// network told it drives the last metres straight (round 46). π (the default): any
-    /// bearing, as round 46's first fine-tune (a) was trained on.
+    /// network told it drives the last metres straight (round 46). π: any bearing, as round
+    /// 46's first fine-tune (a) was trained on; 0.2 (the default): DLM-Net r49's.
     pub arrive_bearing_rad: f64,
     /// Both turn angles (`turn_threshold_rad`, `turn_release_rad`) fall to `blocked_turn_rad`
     /// while the floor plan lets the robot drive less than this straight ahead
     /// ([`PlanningMap::free_ahead_m`]). A robot that faces a wall or a door's jamb cannot go
     /// forward, so a turn it still needs is told until it is nearly done; elsewhere the wide
-    /// release stands, which a camera-driven network needs in a maze. 0 (the default, as before
-    /// round 49): never. Round 48 found DLM-Net leaving a room across a corridor, told
-    /// `go_forward` with 0.4 rad still to turn, standing before the jamb opposite.
+    /// release stands, which a camera-driven network needs in a maze. 0: never, as before round
+    /// 49; 1.2 (the default): DLM-Net r49's. Round 48 found DLM-Net leaving a room across a
+    /// corridor, told `go_forward` with 0.4 rad still to turn, standing before the jamb opposite.
     pub blocked_ahead_m: f64,
     /// The turn angle while blocked (see `blocked_ahead_m`).
     pub blocked_turn_rad: f64,
@@ -162,9 +163,11 @@ impl Default for DlmParams {
             turn_threshold_rad: 0.8,
             turn_release_rad: 0.6,
             stop_distance_m: 0.3,
-            arrive_distance_m: 0.0,
-            arrive_bearing_rad: std::f64::consts::PI,
-            blocked_ahead_m: 0.0,
+            // DLM-Net r49's card (docs/evaluation.md, rounds 46-50): the planner must derive
+            // the DLM the shipped network drives on.
+            arrive_distance_m: 1.5,
+            arrive_bearing_rad: 0.2,
+            blocked_ahead_m: 1.2,
             blocked_turn_rad: 0.2,
         }
     }
@@ -186,17 +189,32 @@ impl DlmParams {
     pub fn curvature() -> Self {
         Self {
             measure: DlmMeasure::Curvature,
+            ..Self::as_before()
+        }
+    }
+
+    /// The defaults with every key added since the first model cards at the value that leaves
+    /// its rule off (`arrive_distance_m` 0, `arrive_bearing_rad` π, `blocked_ahead_m` 0): what a
+    /// card or recording written before the key existed meant, and what DLM-Net r1-r5 were
+    /// trained and driven on.
+    #[must_use]
+    pub fn as_before() -> Self {
+        Self {
+            arrive_distance_m: 0.0,
+            arrive_bearing_rad: std::f64::consts::PI,
+            blocked_ahead_m: 0.0,
             ..Self::default()
         }
     }
 
-    /// The heading measure with its defaults (its chord 1–2 m ahead, as DLM-Net h1–r4 had).
+    /// The heading measure with its defaults (its chord 1–2 m ahead, as DLM-Net h1–r4 had), as
+    /// before the arriving `Stop` and the blocked rule ([`DlmParams::as_before`]).
     #[must_use]
     pub fn heading() -> Self {
         Self {
             measure: DlmMeasure::Heading,
             heading_start_m: 1.0,
-            ..Self::default()
+            ..Self::as_before()
         }
     }
 
@@ -565,12 +583,26 @@ mod tests {
     fn bad_params_name_the_field_and_value() {
         DlmParams::default().validate().unwrap();
         assert_eq!(DlmParams::default().measure, DlmMeasure::FirstTurn);
+        // The heading measure's own defaults but for the measure and the first metre, and the
+        // shipped DLM-Net r49's arriving Stop and turn before a wall.
         assert_eq!(
             DlmParams::default(),
             DlmParams {
                 measure: DlmMeasure::FirstTurn,
                 heading_start_m: 0.0,
+                arrive_distance_m: 1.5,
+                arrive_bearing_rad: 0.2,
+                blocked_ahead_m: 1.2,
                 ..DlmParams::heading()
+            }
+        );
+        assert_eq!(
+            DlmParams::as_before(),
+            DlmParams {
+                arrive_distance_m: 0.0,
+                arrive_bearing_rad: PI,
+                blocked_ahead_m: 0.0,
+                ..DlmParams::default()
             }
         );
         let bad = DlmParams {
@@ -884,7 +916,7 @@ mod tests {
     fn arriving_stop_before_the_goal_but_not_before_a_turn() {
         let arrive = DlmParams {
             arrive_distance_m: 1.5,
-            ..DlmParams::default()
+            ..DlmParams::as_before()
         };
         // 3 m straight, then 1.2 m of a left turn of 0.5 m radius (2.4 rad).
         let mut path = arc(Pose2D::new(0.0, 0.0, 0.0), 0.0, 3.0, 0.05);
@@ -919,7 +951,7 @@ mod tests {
                 &straight,
                 Some(&straight),
                 near,
-                &DlmParams::default(),
+                &DlmParams::as_before(),
                 None
             ),
             Dlm::GoForward
@@ -928,8 +960,18 @@ mod tests {
             Dlm::Stop,
             &straight,
             near,
-            &DlmParams::default()
+            &DlmParams::as_before()
         ));
+        // The defaults are the shipped DLM-Net r49's: arriving within 1.5 m, goal within 0.2 rad.
+        let shipped = DlmParams::default();
+        assert_eq!(
+            (shipped.arrive_distance_m, shipped.arrive_bearing_rad),
+            (1.5, 0.2)
+        );
+        assert_eq!(
+            next_dlm_along(&straight, Some(&straight), near, &shipped, None),
+            Dlm::Stop
+        );
         // With a bearing limit: 1 m before the end, 0.3 m off to the right of the line and
         // facing along it, the goal lies 0.29 rad to the left: a turn, held down to 0.1 rad.
         let aimed = DlmParams {
@@ -994,13 +1036,13 @@ mod tests {
         let dlm =
             |params: &DlmParams, previous| dlm_on_map(&map, &path, robot, goal, params, previous);
         // 0.55 rad is short of the release: forward, turning or not.
-        let open = DlmParams::default();
+        let open = DlmParams::as_before();
         assert_eq!(dlm(&open, None), Dlm::GoForward);
         assert_eq!(dlm(&open, Some(Dlm::TurnLeft)), Dlm::GoForward);
         // Blocked within 0.9 m: the turn starts, and holds.
         let blocked = DlmParams {
             blocked_ahead_m: 0.9,
-            ..DlmParams::default()
+            ..DlmParams::as_before()
         };
         assert_eq!(dlm(&blocked, None), Dlm::TurnLeft);
         assert_eq!(dlm(&blocked, Some(Dlm::TurnLeft)), Dlm::TurnLeft);
@@ -1018,9 +1060,10 @@ mod tests {
             ..blocked
         };
         assert_eq!(bad.validate().unwrap_err().field, "blocked_turn_rad");
+        // Off, a release below blocked_turn_rad is no error.
         let narrow_release = DlmParams {
             turn_release_rad: 0.1,
-            ..DlmParams::default()
+            ..DlmParams::as_before()
         };
         narrow_release.validate().unwrap();
     }
