@@ -238,7 +238,7 @@ impl Topic {
                     "controller": {"type": "string", "enum": ["dlm", "lpe", "none", "path-tracker", "dynamic-window", "expert"]},
                     "map": {"oneOf": [{"type": "null"}, map_ref]},
                     "localized": {"type": "boolean"},
-                    "recovering": {"type": "boolean", "description": "the dynamic window drives in the controller's place"},
+                    "recovering": {"type": "boolean", "description": "the agent's recovery drives in the controller's place: the dynamic window, or backing straight off from someone met face to face"},
                     "rotating_in_place": {"type": "boolean"},
                     "giving_way": {"type": "boolean"}
                 },

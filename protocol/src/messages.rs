@@ -714,8 +714,8 @@ pub struct AgentStatus {
     /// The map the agent localizes on, once it has one.
     pub map: Option<MapRef>,
     pub localized: bool,
-    /// The dynamic window drives in place of `controller`, which the collision monitor kept
-    /// holding back (the agent's recovery, `[safety.recovery]`).
+    /// The agent's recovery drives in place of `controller` (`[safety.recovery]`): the dynamic
+    /// window, or backing straight off from someone met face to face (`back_up_m`).
     #[serde(default)]
     pub recovering: bool,
     /// The rotation shim turns the robot on the spot towards its path, which lies behind it,

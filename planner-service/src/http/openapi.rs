@@ -212,7 +212,7 @@ fn schemas() -> Value {
                 "stop_reason": { "oneOf": [r("StopReason"), { "type": "null" }] },
                 "controller": { "type": "string", "enum": ["dlm", "lpe", "none", "path-tracker", "dynamic-window"] },
                 "localized": { "type": "boolean" },
-                "recovering": { "type": "boolean", "description": "the dynamic window drives in place of controller, which the collision monitor kept holding back" },
+                "recovering": { "type": "boolean", "description": "the agent's recovery drives in place of controller (stuck, held back by the collision monitor or short of the goal): the dynamic window, or backing straight off from someone met face to face" },
                 "rotating_in_place": { "type": "boolean", "description": "the rotation shim turns the robot on the spot towards its path before controller drives on" },
                 "giving_way": { "type": "boolean", "description": "the give-way rule holds the robot short of a narrow passage while someone comes through it the other way" }
             }
