@@ -179,13 +179,17 @@ pub const BESIDE_HALF_ANGLE_RAD: f64 = 1.0;
 /// (infinite: none).
 #[must_use]
 pub fn beside_m(points_m: &[[f64; 2]], pose: Pose2D) -> f64 {
+    nearest_before_m(points_m.iter().copied(), pose)
+}
+
+/// [`beside_m`] over any points, without collecting them.
+fn nearest_before_m(points_m: impl Iterator<Item = [f64; 2]>, pose: Pose2D) -> f64 {
     let (sin, cos) = pose.yaw_rad.sin_cos();
     // Within the sector: the point's component along the heading is at least cos(half angle)
     // of its distance (no atan2 per point).
     let min_cos = BESIDE_HALF_ANGLE_RAD.cos();
     points_m
-        .iter()
-        .filter_map(|&[x_m, y_m]| {
+        .filter_map(|[x_m, y_m]| {
             let (dx, dy) = (x_m - pose.x_m, y_m - pose.y_m);
             let d_m = dx.hypot(dy);
             (dx * cos + dy * sin >= min_cos * d_m).then_some(d_m)
@@ -216,16 +220,15 @@ pub fn walker_m(tracks: &[Track], pose: Pose2D) -> f64 {
 /// building, `gen_eval_1000006`, which backed off from its own first cabinet and stalled).
 #[must_use]
 pub fn oncoming_m(tracks: &[Track], pose: Pose2D) -> f64 {
-    let oncoming: Vec<[f64; 2]> = tracks
+    let oncoming = tracks
         .iter()
         .filter(|t| {
             let (dx, dy) = (pose.x_m - t.x_m, pose.y_m - t.y_m);
             let d_m = dx.hypot(dy);
             t.settled() && t.vx_mps * dx + t.vy_mps * dy >= MIN_WALKING_MPS * d_m
         })
-        .map(|t| [t.x_m, t.y_m])
-        .collect();
-    beside_m(&oncoming, pose)
+        .map(|t| [t.x_m, t.y_m]);
+    nearest_before_m(oncoming, pose)
 }
 
 /// What the collision monitor did to the previous cycle's command, and how far the nearest
@@ -438,7 +441,7 @@ impl Recovery {
             best_m <= c.approach_m && now - since_s >= c.approach_stall_s
         });
         if short_of_goal {
-            self.fall_back(pose, now, "short of the goal");
+            self.hand_over(Mode::Fallback, pose, now, "short of the goal");
             return Mode::Fallback;
         }
         // Any heading counts as the same spot here: turning on the spot beside it is no way out.
@@ -462,7 +465,7 @@ impl Recovery {
             (self.held_s - dt_s).max(0.0)
         };
         if self.held_s >= c.stall_s {
-            self.fall_back(pose, now, "held by the collision monitor");
+            self.hand_over(Mode::Fallback, pose, now, "held by the collision monitor");
             return Mode::Fallback;
         }
         Mode::Primary
@@ -489,10 +492,6 @@ impl Recovery {
         };
         self.hand_over(mode, pose, now, why);
         mode
-    }
-
-    fn fall_back(&mut self, pose: Pose2D, now: f64, why: &str) {
-        self.hand_over(Mode::Fallback, pose, now, why);
     }
 
     fn hand_over(&mut self, mode: Mode, pose: Pose2D, now: f64, why: &str) {
