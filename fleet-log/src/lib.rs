@@ -16,7 +16,7 @@
 //! | `/amcl_pose` | [`protocol::PoseEstimate`] the agent published | agent |
 //! | `/intention` | [`protocol::Intention`] without the LPE image bytes | planner → agent |
 //! | `/cmd_vel` | [`protocol::CmdVel`] the agent commanded | agent |
-//! | `/agent_status` | [`protocol::AgentStatus`]: its state, and whether the dynamic window (recovering), the rotation shim or the give-way rule drives in the controller's place; each change | agent |
+//! | `/agent_status` | [`protocol::AgentStatus`]: its state, and whether the recovery (the dynamic window, or backing off), the rotation shim or the give-way rule drives in the controller's place; each change | agent |
 //! | `/initialpose` | [`InitialPose`]: a re-initialisation of the filter (not the first one) | operator / judge |
 //! | `/ground_truth` | [`StampedPose`]: the true pose (simulator only) | simulator |
 //! | `/run_summary` | [`RunSummary`]: how a lock-step run ended | `eval` |

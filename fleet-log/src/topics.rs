@@ -239,6 +239,7 @@ impl Topic {
                     "map": {"oneOf": [{"type": "null"}, map_ref]},
                     "localized": {"type": "boolean"},
                     "recovering": {"type": "boolean", "description": "the agent's recovery drives in the controller's place: the dynamic window, or backing straight off from someone met face to face"},
+                    "backing_up": {"type": "boolean", "description": "of recovering: backing straight off from someone met face to face"},
                     "rotating_in_place": {"type": "boolean"},
                     "giving_way": {"type": "boolean"}
                 },

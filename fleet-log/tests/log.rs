@@ -111,6 +111,7 @@ fn messages() -> Vec<LogMessage> {
             map: Some(map_ref()),
             localized: true,
             recovering: true,
+            backing_up: false,
             rotating_in_place: false,
             giving_way: false,
         }),

@@ -718,6 +718,10 @@ pub struct AgentStatus {
     /// window, or backing straight off from someone met face to face (`back_up_m`).
     #[serde(default)]
     pub recovering: bool,
+    /// Of `recovering`: the recovery backs the robot straight off the way it came, from someone
+    /// met face to face (`[safety.recovery] back_up_m`); no controller drives meanwhile.
+    #[serde(default)]
+    pub backing_up: bool,
     /// The rotation shim turns the robot on the spot towards its path, which lies behind it,
     /// before `controller` drives on (`[rotation_shim]`).
     #[serde(default)]

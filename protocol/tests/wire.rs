@@ -134,6 +134,7 @@ fn status() -> AgentStatus {
         map: Some(map_ref()),
         localized: true,
         recovering: false,
+        backing_up: false,
         rotating_in_place: false,
         giving_way: false,
     }
@@ -259,6 +260,7 @@ fn every_status_and_task_state_round_trips() {
                 stop_reason: reason.clone(),
                 map: None,
                 recovering: state == AgentState::Driving,
+                backing_up: false,
                 rotating_in_place: state == AgentState::Driving,
                 giving_way: state == AgentState::Driving,
                 ..status()
@@ -788,16 +790,18 @@ fn unknown_fields_are_rejected() {
 /// it); an agent built before a flag existed leaves it out, and its status still parses.
 #[test]
 fn agent_status_takeover_flags_round_trip_and_default_to_false() {
-    for (recovering, rotating_in_place, giving_way) in [
-        (false, true, false),
-        (false, false, true),
-        (true, false, false),
-        (false, true, true),
+    for (recovering, backing_up, rotating_in_place, giving_way) in [
+        (false, false, true, false),
+        (false, false, false, true),
+        (true, false, false, false),
+        (true, true, false, false),
+        (false, false, true, true),
     ] {
         let sent = AgentStatus {
             state: AgentState::Driving,
             stop_reason: None,
             recovering,
+            backing_up,
             rotating_in_place,
             giving_way,
             ..status()
@@ -812,12 +816,17 @@ fn agent_status_takeover_flags_round_trip_and_default_to_false() {
             text.contains(&format!("\"giving_way\":{giving_way}")),
             "{text}"
         );
+        assert!(
+            text.contains(&format!("\"backing_up\":{backing_up}")),
+            "{text}"
+        );
     }
 
     // A status as an agent from before the two flags encoded it.
     let old = br#"{"wire_version":1,"kind":"status","msg":{"header":{"seq":7,"stamp_ns":1723456789823456789},"state":"driving","stop_reason":null,"controller":"lpe","map":{"name":"office_3f","version":4},"localized":true,"recovering":true}}"#;
     let parsed: AgentStatus = decode(old).unwrap();
     assert!(parsed.recovering);
+    assert!(!parsed.backing_up);
     assert!(!parsed.rotating_in_place);
     assert!(!parsed.giving_way);
     assert_eq!(parsed.state, AgentState::Driving);
@@ -826,7 +835,9 @@ fn agent_status_takeover_flags_round_trip_and_default_to_false() {
     // And from before `recovering` too.
     let older = br#"{"wire_version":1,"kind":"status","msg":{"header":{"seq":7,"stamp_ns":1723456789823456789},"state":"idle","stop_reason":null,"controller":"dlm","map":null,"localized":false}}"#;
     let parsed: AgentStatus = decode(older).unwrap();
-    assert!(!parsed.recovering && !parsed.rotating_in_place && !parsed.giving_way);
+    assert!(
+        !parsed.recovering && !parsed.backing_up && !parsed.rotating_in_place && !parsed.giving_way
+    );
 }
 
 /// The wire fuzzer's seed corpus (`fuzz/seeds/wire_decode`) is these fixtures as the codec

@@ -198,9 +198,12 @@ pub struct Decision {
     /// What the collision monitor did to the command (`None` when the command was to stand or
     /// turn in place, or the monitor is off).
     pub collision_monitor: Option<Verdict>,
-    /// The dynamic window drove this cycle in place of the configured controller, which the
-    /// collision monitor had held in front of an obstacle ([`crate::recovery`]).
+    /// The recovery drove this cycle in place of the configured controller
+    /// ([`crate::recovery`]): the dynamic window, or backing straight off.
     pub recovering: bool,
+    /// Of `recovering`: the robot backs straight off from someone met face to face
+    /// (`[safety.recovery] back_up_m`; the status's `backing_up`).
+    pub backing_up: bool,
     /// The rotation shim turned the robot towards its path this cycle
     /// ([`crate::rotation_shim`]; the status's `rotating_in_place`).
     pub rotating: bool,
@@ -248,8 +251,10 @@ pub struct Supervisor {
     camera_hold: Option<CameraHold>,
     /// What the hold looks at this cycle (set while the controller drives).
     hold_obs: Option<HoldObservation>,
-    /// Whether the fallback drove the last cycle.
+    /// Whether the fallback drove the last cycle, or the recovery backed the robot off.
     recovering: bool,
+    /// Whether the recovery backed the robot straight off in the last cycle.
+    backing_up: bool,
     odometry: VecDeque<Odometry>,
     scan: Option<LaserScan>,
     /// What the collision monitor did in this cycle.
@@ -346,6 +351,7 @@ impl Supervisor {
             camera_hold,
             hold_obs: None,
             recovering: false,
+            backing_up: false,
             odometry: VecDeque::with_capacity(ODOM_HISTORY),
             scan: None,
             monitor: None,
@@ -611,6 +617,7 @@ impl Supervisor {
             }
         }
         let recovering = self.recovering && state == AgentState::Driving;
+        let backing_up = self.backing_up && recovering;
         self.cmd_v_mps = v;
         self.cmd_omega_radps = w;
         self.state = state;
@@ -624,6 +631,7 @@ impl Supervisor {
             stop_reason: reason,
             collision_monitor: self.monitor,
             recovering,
+            backing_up,
             rotating,
             giving_way,
         }
@@ -642,6 +650,7 @@ impl Supervisor {
         }
         self.movers.reset();
         self.recovering = false;
+        self.backing_up = false;
     }
 
     /// Whether a stuck controller is relieved by the dynamic window (`[safety.recovery]` on
@@ -678,10 +687,11 @@ impl Supervisor {
         self.state == AgentState::Driving && self.give_way.as_ref().is_some_and(GiveWay::waiting)
     }
 
-    /// The controller that drives now: the configured one, or the dynamic window recovering.
+    /// The controller that drives now: the configured one, or the dynamic window recovering
+    /// (backing off, no controller drives: the configured one takes the robot on after).
     #[must_use]
     pub fn active_controller(&self) -> ControllerKind {
-        if self.recovering {
+        if self.recovering && !self.backing_up {
             ControllerKind::DynamicWindow
         } else {
             self.config.controller
@@ -696,6 +706,7 @@ impl Supervisor {
         limits: &Limits,
     ) -> (Option<(f64, f64)>, AgentState, Option<StopReason>) {
         let stop = |reason| (None, AgentState::Stopping, Some(reason));
+        self.backing_up = false;
         let position_std_m = self.position_std_m();
         if position_std_m > self.config.safety.max_position_std_m || self.amcl.is_lost() {
             // Not finite only before the first estimate; the status needs a number.
@@ -837,6 +848,7 @@ impl Supervisor {
         if mode == Mode::BackUp {
             // Straight back the way the robot came; the controller takes it on afresh after.
             self.recovering = true;
+            self.backing_up = true;
             if let Some(shim) = &mut self.shim {
                 shim.reset();
             }
@@ -900,6 +912,7 @@ impl Supervisor {
             map: Some(self.map.clone()),
             localized: self.localized(),
             recovering: self.recovering,
+            backing_up: self.recovering && self.backing_up,
             rotating_in_place: self.rotating(),
             giving_way: self.giving_way(),
         }
@@ -1138,6 +1151,7 @@ async fn run_in_session(
         map: None,
         localized: false,
         recovering: false,
+        backing_up: false,
         rotating_in_place: false,
         giving_way: false,
     };
@@ -1211,8 +1225,9 @@ async fn run_in_session(
     let mut cmd_seq = 0u64;
     let mut published: (AgentState, Option<StopReason>) = (AgentState::Starting, None);
     let mut published_recovering = false;
-    // What the last published status said of the rotation shim and the give-way rule.
-    let mut published_takeover = (false, false);
+    // What the last published status said of backing off, the rotation shim and the give-way
+    // rule.
+    let mut published_takeover = (false, false, false);
 
     loop {
         tokio::select! {
@@ -1295,16 +1310,21 @@ async fn run_in_session(
                     }
                 }
                 if decision.recovering != published_recovering {
-                    if decision.recovering {
+                    if decision.backing_up {
                         tracing::info!(
                             recoveries = agent.recoveries(),
-                            "held back by the collision monitor: the dynamic window takes over"
+                            "met face to face: backing straight off"
+                        );
+                    } else if decision.recovering {
+                        tracing::info!(
+                            recoveries = agent.recoveries(),
+                            "stuck: the dynamic window takes over"
                         );
                     } else {
                         tracing::info!(controller = %agent.active_controller(), "recovered: handed back");
                     }
                 }
-                let takeover = (decision.rotating, decision.giving_way);
+                let takeover = (decision.backing_up, decision.rotating, decision.giving_way);
                 // The status says whether it is recovering, turning in place or giving way, so
                 // each hand-over is news too (the operator sees why the robot stands or turns).
                 if condition_changed

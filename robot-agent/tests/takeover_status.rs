@@ -533,6 +533,10 @@ fn met_in_a_glass_doorway_the_recovery_backs_off_and_touches_no_pane() {
     for &k in &backing {
         assert!(cycles[k].status.recovering, "cycle {k}: the status says so");
         assert!(
+            cycles[k].decision.backing_up && cycles[k].status.backing_up,
+            "cycle {k}: backing off, not the dynamic window"
+        );
+        assert!(
             cycles[k].decision.cmd_omega_radps.abs() < 1e-9,
             "cycle {k}: straight back"
         );
@@ -545,6 +549,12 @@ fn met_in_a_glass_doorway_the_recovery_backs_off_and_touches_no_pane() {
     // Without the back-off, the dynamic window swings round the person into a pane.
     let cycles = run(0.0);
     assert!(cycles.iter().any(|c| c.decision.recovering));
+    assert!(
+        cycles
+            .iter()
+            .all(|c| !c.decision.backing_up && !c.status.backing_up),
+        "back_up_m 0: the dynamic window recovers, nobody backs off"
+    );
     let contacts: usize = cycles.iter().map(|c| c.collisions).sum();
     assert!(
         contacts > 0,

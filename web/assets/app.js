@@ -679,10 +679,12 @@ function renderRobots() {
 }
 
 // The agent's rules that drive in place of its controller for a while, by their status flags:
-// the dynamic window recovering, the rotation shim turning the robot towards a path behind it,
-// the give-way rule holding it short of a narrow passage. Older agents send no flag: none shown.
+// the recovery (the dynamic window, or backing straight off from someone met face to face), the
+// rotation shim turning the robot towards a path behind it, the give-way rule holding it short of
+// a narrow passage. Older agents send no flag: none shown.
 const TAKEOVERS = [
   ['recovering', 'recovering'],
+  ['backing_up', 'backing off'],
   ['rotating_in_place', 'turning in place'],
   ['giving_way', 'giving way'],
 ];
@@ -692,10 +694,11 @@ function takeovers(status) {
 }
 
 // The configured controller, and which rule drives in its place; while the agent recovers, the
-// dynamic window drives instead.
+// dynamic window drives instead, unless the recovery backs the robot off (no controller drives).
 function controllerText(status) {
   if (!status) return '—';
-  const base = status.recovering ? `${status.controller} → dynamic-window` : status.controller;
+  const window = status.recovering && status.backing_up !== true;
+  const base = window ? `${status.controller} → dynamic-window` : status.controller;
   const notes = takeovers(status).map(([, text]) => text);
   return notes.length ? `${base} (${notes.join(', ')})` : base;
 }

@@ -272,7 +272,7 @@ test('a task made by clicking two goals gets a robot driving', { timeout: 120_00
   const flags = takeover ? takeover.split(' ') : [];
   const configured = (await api(`api/v1/robots/${robotId}`)).status.controller;
   assert.ok(controllerText.startsWith(configured), `controller shown: ${controllerText}, configured: ${configured}`);
-  for (const [flag, words] of [['recovering', 'recovering'], ['rotating_in_place', 'turning in place'], ['giving_way', 'giving way']]) {
+  for (const [flag, words] of [['recovering', 'recovering'], ['backing_up', 'backing off'], ['rotating_in_place', 'turning in place'], ['giving_way', 'giving way']]) {
     assert.equal(controllerText.includes(words), flags.includes(flag), `controller shown: ${controllerText}, flags: ${takeover}`);
   }
   for (const testid of ['lpe-image', 'camera-image']) {

@@ -684,6 +684,7 @@ pub fn run_with(
             state = ?decision.state, goal_index, remaining,
             monitor_scale = decision.collision_monitor.map(|m| m.scale),
             recovering = decision.recovering,
+            backing_up = decision.backing_up,
             rotating = decision.rotating,
             giving_way = decision.giving_way,
             people = ?world.people.iter().map(|p| (p.x_m, p.y_m)).collect::<Vec<_>>(),

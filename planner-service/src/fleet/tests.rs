@@ -62,6 +62,7 @@ fn status(localized: bool) -> AgentStatus {
         map: None,
         localized,
         recovering: false,
+        backing_up: false,
         rotating_in_place: false,
         giving_way: false,
     }

@@ -275,9 +275,13 @@ pub struct StatusView {
     pub stop_reason: Option<StopReason>,
     pub controller: ControllerKind,
     pub localized: bool,
-    /// The dynamic window drives in place of `controller` (the agent's recovery).
+    /// The agent's recovery drives in place of `controller`: the dynamic window, or backing
+    /// straight off.
     #[serde(default)]
     pub recovering: bool,
+    /// Of `recovering`: backing straight off from someone met face to face.
+    #[serde(default)]
+    pub backing_up: bool,
     /// The agent's rotation shim turns the robot on the spot towards its path.
     #[serde(default)]
     pub rotating_in_place: bool,
@@ -295,6 +299,7 @@ impl From<&AgentStatus> for StatusView {
             controller: s.controller,
             localized: s.localized,
             recovering: s.recovering,
+            backing_up: s.backing_up,
             rotating_in_place: s.rotating_in_place,
             giving_way: s.giving_way,
         }

@@ -206,13 +206,14 @@ fn schemas() -> Value {
             }
         },
         "RobotStatus": {
-            "type": "object", "required": ["state", "stop_reason", "controller", "localized", "recovering", "rotating_in_place", "giving_way"],
+            "type": "object", "required": ["state", "stop_reason", "controller", "localized", "recovering", "backing_up", "rotating_in_place", "giving_way"],
             "properties": {
                 "state": { "type": "string", "enum": ["starting", "idle", "driving", "stopping", "stopped", "relocalizing"] },
                 "stop_reason": { "oneOf": [r("StopReason"), { "type": "null" }] },
                 "controller": { "type": "string", "enum": ["dlm", "lpe", "none", "path-tracker", "dynamic-window"] },
                 "localized": { "type": "boolean" },
                 "recovering": { "type": "boolean", "description": "the agent's recovery drives in place of controller (stuck, held back by the collision monitor or short of the goal): the dynamic window, or backing straight off from someone met face to face" },
+                "backing_up": { "type": "boolean", "description": "of recovering: the robot backs straight off the way it came from someone met face to face (no controller drives meanwhile)" },
                 "rotating_in_place": { "type": "boolean", "description": "the rotation shim turns the robot on the spot towards its path before controller drives on" },
                 "giving_way": { "type": "boolean", "description": "the give-way rule holds the robot short of a narrow passage while someone comes through it the other way" }
             }
