@@ -75,12 +75,15 @@ DEFAULT_MAX_TURN_RADPS = 1.2
 DEFAULT_DLM_MEASURE = "curvature"
 # DLM parameters the planner gained after recordings wrote `dlm_params`, with the value that
 # means what those recordings had (planning DlmParams: no arriving Stop; once there was one,
-# at any bearing of the goal; no narrower turn angles before a wall, round 49).
+# at any bearing of the goal; no narrower turn angles before a wall, round 49; no sidestep round
+# what the laser sees, round 51).
 ADDED_DLM_PARAMS = {
     "arrive_distance_m": 0.0,
     "arrive_bearing_rad": math.pi,
     "blocked_ahead_m": 0.0,
     "blocked_turn_rad": 0.2,
+    "sidestep_ahead_m": 0.0,
+    "sidestep_turn_rad": 0.3,
 }
 
 

@@ -8,7 +8,8 @@ A card's `closed_loop` (the network's rows of `eval table`) goes stale when the 
 round a network change (a rotation shim, a recovery) and the table is run again: the weights
 are the same, the figures are not. Re-exporting needs the training checkpoint, which stays on
 the machine that trained; this rewrites only the ONNX metadata_props key `closed_loop`, and the
-same key in the card JSON beside the model.
+same key in the card JSON beside the model (with `--drive-dlm-params`, `dlm_params` and
+`dlm_params_trained` too: a planner rule the network is driven on, its weights untouched).
 
 Checked, failing loudly, before anything is written: the model's card and the JSON agree on
 every key but `closed_loop` (the JSON also carries the export check's `onnx_*` keys, of which
@@ -46,8 +47,10 @@ def write_atomically(path: Path, blob: bytes) -> None:
 
 
 def recard(model: Path, card_json: Path | None, tables: list[str | Path],
-           commands: list[str] | None = None) -> dict[str, str]:
-    """Rewrites `closed_loop` in `model` (and `card_json`); returns the new card."""
+           commands: list[str] | None = None, drive_dlm_params: dict | None = None) -> dict[str, str]:
+    """Rewrites `closed_loop` in `model` (and `card_json`), and with `drive_dlm_params` the DLM
+    parameters a DLM-Net is driven on (`dlm_params`; export's `--drive-dlm-params`, the
+    parameters it was trained on kept as `dlm_params_trained`); returns the new card."""
     proto = onnx.load(str(model))
     card = card_of(proto)
     kind = card.get("kind")
@@ -61,6 +64,15 @@ def recard(model: Path, card_json: Path | None, tables: list[str | Path],
         if differ:
             raise SystemExit(f"{card_json} is not the card of {model}: they differ on {', '.join(differ)}")
     new = dict(card, closed_loop=closed_loop_summary(tables, kind, commands))
+    if drive_dlm_params:
+        # Here only: the export brings torch with it, which the plain recard does not need.
+        from training.export import drive_dlm_with
+        trained = card.get("dlm_params_trained")
+        drive_dlm_with(new, drive_dlm_params)
+        if trained is not None:
+            # Driven on other parameters before: what the labels were derived with stays.
+            new["dlm_params_trained"] = trained
+    changed = ("closed_loop", "dlm_params", "dlm_params_trained")
     try:
         card_mod.check(new)
     except ValueError as e:
@@ -79,7 +91,9 @@ def recard(model: Path, card_json: Path | None, tables: list[str | Path],
 
     write_atomically(model, blob)
     if card_json is not None and recorded is not None:
-        recorded["closed_loop"] = new["closed_loop"]
+        for key in changed:
+            if key in new:
+                recorded[key] = new[key]
         if "onnx_mb" in recorded:
             # The export's record of the file's size: the longer card makes the file longer.
             recorded["onnx_mb"] = f"{len(blob) / 1e6:.3f}"
@@ -98,8 +112,20 @@ def main(argv=None) -> int:
                    help="eval table results (table.json) whose rows for this network become the card's closed_loop")
     p.add_argument("--commands", nargs="+", metavar="COMMAND",
                    help="the command that made each table, in the order of --closed-loop")
+    p.add_argument("--drive-dlm-params", metavar="JSON",
+                   help="a DLM-Net: drive it on these DLM parameters (a JSON object, e.g. "
+                        "'{\"sidestep_ahead_m\": 2.0}'), those it was trained on kept as dlm_params_trained")
     args = p.parse_args(argv)
-    recard(Path(args.model), Path(args.card_json) if args.card_json else None, args.closed_loop, args.commands)
+    drive = None
+    if args.drive_dlm_params:
+        try:
+            drive = json.loads(args.drive_dlm_params)
+        except json.JSONDecodeError as e:
+            raise SystemExit(f"--drive-dlm-params: not JSON ({e}): {args.drive_dlm_params!r}") from e
+        if not isinstance(drive, dict):
+            raise SystemExit(f"--drive-dlm-params: a JSON object of DLM parameters, not {args.drive_dlm_params!r}")
+    recard(Path(args.model), Path(args.card_json) if args.card_json else None, args.closed_loop, args.commands,
+           drive)
     return 0
 
 

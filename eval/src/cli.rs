@@ -285,6 +285,11 @@ pub struct TableArgs {
     /// `dlm.blocked_turn_rad`; over what the DLM-Net's card says.
     #[arg(long)]
     dlm_blocked_ahead_m: Option<f64>,
+    /// The planner's `dlm.sidestep_ahead_m` (m; 0: never): where the path goes round what the
+    /// laser sees and the floor plan lacks, the path point this far ahead tells the turn; over
+    /// what the DLM-Net's card says.
+    #[arg(long)]
+    dlm_sidestep_m: Option<f64>,
 }
 
 impl TableArgs {
@@ -418,6 +423,11 @@ pub struct RecordArgs {
     /// card says; recorded in index.json's `dlm_params`.
     #[arg(long)]
     dlm_blocked_ahead_m: Option<f64>,
+    /// The planner's `dlm.sidestep_ahead_m` (m; 0: never): where the path goes round what the
+    /// laser sees and the floor plan lacks, the path point this far ahead tells the turn; over
+    /// what the DLM-Net's card says.
+    #[arg(long)]
+    dlm_sidestep_m: Option<f64>,
     /// Output folder: index.json and shard_NNNNN/*.npy (training/DATASET.md).
     #[arg(long)]
     out: PathBuf,
@@ -477,14 +487,15 @@ fn dlm_params_for(
     }
 }
 
-/// `params` with `arrive_m`, `bearing_rad` and `blocked_m` (when given) as its
-/// `arrive_distance_m`, `arrive_bearing_rad` and `blocked_ahead_m`, warning when that changes
+/// `params` with `arrive_m`, `bearing_rad`, `blocked_m` and `sidestep_m` (when given) as its
+/// `arrive_distance_m`, `arrive_bearing_rad`, `blocked_ahead_m` and `sidestep_ahead_m`, warning when that changes
 /// what a card said; the intention pipeline's validation checks the values.
 fn with_overrides(
     params: planning::DlmParams,
     arrive_m: Option<f64>,
     bearing_rad: Option<f64>,
     blocked_m: Option<f64>,
+    sidestep_m: Option<f64>,
 ) -> planning::DlmParams {
     let mut out = params;
     for (given, field, name) in [
@@ -495,6 +506,7 @@ fn with_overrides(
             "--dlm-arrive-bearing-rad",
         ),
         (blocked_m, &mut out.blocked_ahead_m, "--dlm-blocked-ahead-m"),
+        (sidestep_m, &mut out.sidestep_ahead_m, "--dlm-sidestep-m"),
     ] {
         if let Some(value) = given {
             if value.to_bits() != field.to_bits() {
@@ -598,6 +610,7 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
                 args.dlm_arrive_m,
                 args.dlm_arrive_bearing_rad,
                 args.dlm_blocked_ahead_m,
+                args.dlm_sidestep_m,
             );
             run
         },
@@ -769,6 +782,7 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
                 args.dlm_arrive_m,
                 args.dlm_arrive_bearing_rad,
                 args.dlm_blocked_ahead_m,
+                args.dlm_sidestep_m,
             );
             intention
         },

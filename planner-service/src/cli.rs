@@ -650,7 +650,15 @@ fn plan(args: &PlanArgs, out: &mut dyn Write) -> anyhow::Result<()> {
     let path = planner
         .plan(args.start, args.goal)
         .context("planning failed")?;
-    let dlm = dlm_on_map(&map, &path.poses, args.start, args.goal, &cfg.dlm, None);
+    let dlm = dlm_on_map(
+        &map,
+        &path.poses,
+        args.start,
+        args.goal,
+        &cfg.dlm,
+        None,
+        &[],
+    );
 
     if let Some(lpe_path) = &args.lpe {
         let img = render_lpe(map.grid(), args.start, &[], &path.poses, &cfg.lpe)?;

@@ -926,3 +926,89 @@ fn the_last_straight_metres_before_a_goal_are_an_arriving_stop() {
         pairs.len()
     );
 }
+
+/// A robot that keeps to the corridor's centre line towards the cabinet is told to turn away
+/// from it where the plan goes round it (`dlm.sidestep_ahead_m`): the floor plan's route, which
+/// the DLM measures, runs straight through the cabinet, so without the rule it hears
+/// `go_forward` all the way in (DLM-Net r49 on task C, round 51).
+#[test]
+fn a_robot_heading_for_a_seen_cabinet_is_told_to_turn_away_from_it() {
+    let goals = [Goal::at(25.5, 5.2)];
+    let progress = GoalProgress::new(&goals, 0);
+    let drive = |sidestep_ahead_m: f64| {
+        let mut config = IntentionConfig::default();
+        config.dlm.sidestep_ahead_m = sidestep_ahead_m;
+        let mut planner = IntentionPlanner::new(scenario_map("corridor", &config), config).unwrap();
+        // From 4.6 m short of the cabinet's face to 0.6 m short, heading east on y 5.2.
+        (0..=20)
+            .map(|k| {
+                let x_m = 7.0 + 0.2 * f64::from(k);
+                let mut seeing = estimate(Pose2D::new(x_m, 5.2, 0.0), 1 + u64::from(k as u8));
+                seeing.unmapped_obstacles_m = cabinet_points();
+                match planner.answer(&seeing, &progress, false) {
+                    Answer::Heading { plan: Ok(p), .. } => (x_m, p.dlm),
+                    other => panic!("no plan at {x_m}: {other:?}"),
+                }
+            })
+            .collect::<Vec<_>>()
+    };
+    let off = drive(0.0);
+    assert!(off.iter().all(|&(_, d)| d == Dlm::GoForward), "{off:?}");
+    let on = drive(2.0);
+    // The cabinet stands on the corridor's north (left) half: the way round is to the right.
+    assert!(on.iter().all(|&(_, d)| d != Dlm::TurnLeft), "{on:?}");
+    let first = on.iter().find(|&&(_, d)| d == Dlm::TurnRight);
+    assert!(
+        first.is_some_and(|&(x_m, _)| x_m < 10.6),
+        "told the turn at least a metre before the cabinet: {on:?}"
+    );
+    // Far from it, the rule is silent.
+    assert_eq!(on[0].1, Dlm::GoForward, "{on:?}");
+}
+
+/// Where the floor plan's route turns by itself (task E's maze, a box standing in the corner
+/// it turns round), the path's bend round the box is the route's: the sidestep rule stays
+/// silent and the DLM is the measure's. Told the turn here, DLM-Net r49 cut the corner of the
+/// wall before the gap (task E seed 6, round 51: this pose, its path and what its laser saw).
+#[test]
+fn a_seen_box_in_a_corner_the_route_turns_round_changes_no_dlm() {
+    let config = IntentionConfig::default();
+    let map = scenario_map("maze", &config);
+    let goal = Pose2D::new(25.0, 17.2, 0.0);
+    let robot = Pose2D::new(5.074, 4.441, 0.268);
+    let mut path: Vec<Pose2D> = [
+        (5.07, 4.44),
+        (5.51, 4.77),
+        (5.69, 4.86),
+        (5.92, 4.95),
+        (6.15, 5.04),
+        (6.39, 5.14),
+        (6.51, 5.22),
+        (6.68, 5.4),
+        (6.88, 5.54),
+        (7.09, 5.68),
+        (7.29, 5.81),
+        (7.5, 5.95),
+    ]
+    .iter()
+    .map(|&(x, y)| Pose2D::new(x, y, 0.0))
+    .collect();
+    path.push(goal);
+    let seen = [planning::Disc {
+        x_m: 7.15,
+        y_m: 4.8,
+        radius_m: config.seen.radius_m,
+    }];
+    // On by default; off as before round 51.
+    let off = DlmParams {
+        sidestep_ahead_m: 0.0,
+        ..config.dlm.clone()
+    };
+    for previous in [None, Some(Dlm::GoForward), Some(Dlm::TurnLeft)] {
+        let dlm = |params: &DlmParams| {
+            planning::intention::dlm_on_map(&map, &path, robot, goal, params, previous, &seen)
+        };
+        assert_eq!(dlm(&off), Dlm::GoForward, "after {previous:?}");
+        assert_eq!(dlm(&config.dlm), Dlm::GoForward, "after {previous:?}");
+    }
+}

@@ -102,6 +102,23 @@ def main() -> int:
         assert {k: v for k, v in recorded.items() if k not in ("closed_loop", "onnx_mb")} == {
             k: v for k, v in old_json.items() if k not in ("closed_loop", "onnx_mb")}
         assert not list(tmp.glob("*.tmp")), "temporary files left behind"
+
+        # Driven on a planner rule added since (the sidestep, round 51): dlm_params changes in
+        # both, what the labels were derived with stays dlm_params_trained; nothing else moves.
+        refused("not a DLM parameter", model, card_json, [tasks], None, {"measure": "route"})
+        refused("not a non-negative number", model, card_json, [tasks], None, {"sidestep_ahead_m": -1})
+        driven = rc.recard(model, card_json, [tasks], None, {"sidestep_ahead_m": 2.0})
+        params = json.loads(driven["dlm_params"])
+        assert params["sidestep_ahead_m"] == 2.0, params
+        assert {k: v for k, v in params.items() if k != "sidestep_ahead_m"} == {
+            k: v for k, v in json.loads(old_card["dlm_params"]).items() if k != "sidestep_ahead_m"}, params
+        assert driven["dlm_params_trained"] == old_card["dlm_params_trained"], driven["dlm_params_trained"]
+        card = rc.card_of(onnx.load(str(model)))
+        recorded = json.loads(card_json.read_text())
+        for key in ("dlm_params", "dlm_params_trained", "closed_loop"):
+            assert card[key] == recorded[key] == driven[key], key
+        assert {k: v for k, v in card.items() if k not in ("closed_loop", "dlm_params")} == {
+            k: v for k, v in old_card.items() if k not in ("closed_loop", "dlm_params")}
     print("recard: ok")
     return 0
 

@@ -485,6 +485,7 @@ impl IntentionPlanner {
             goal,
             &self.config.dlm,
             self.last_dlm,
+            &discs[robot_discs..],
         );
         self.last_dlm = Some(dlm);
         let arriving = is_arriving(dlm, &poses, robot, &self.config.dlm);
