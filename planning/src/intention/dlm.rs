@@ -737,7 +737,10 @@ mod tests {
             ..DlmParams::default()
         };
         let e = bad.validate().unwrap_err();
-        assert_eq!(e.to_string(), "invalid dlm.sidestep_ahead_m = -1: must be >= 0 and finite");
+        assert_eq!(
+            e.to_string(),
+            "invalid dlm.sidestep_ahead_m = -1: must be >= 0 and finite"
+        );
     }
 
     /// Poses along an arc (positive curvature = left) from `start`, `step` metres apart.
