@@ -147,12 +147,13 @@ pub struct DlmParams {
     /// The turn angle while blocked (see `blocked_ahead_m`).
     pub blocked_turn_rad: f64,
     /// Where the searched path goes round an obstacle the robot's laser sees and the floor
-    /// plan lacks (a cabinet, [`super::seen`]), and the measure says `GoForward`: the path
-    /// point this far ahead (arc length) decides, as the paper's DLM does from the path's
-    /// local curvature. `TurnLeft`/`TurnRight` towards it while its bearing from the heading
-    /// is at least `sidestep_turn_rad`, held down to half that. The measures turn on the floor
-    /// plan's route, which runs straight past the cabinet: told `go_forward`, DLM-Net r49 kept
-    /// to the corridor's middle and clipped task C's cabinet in 9 runs of 10 (round 51).
+    /// plan lacks (a cabinet, [`super::seen`]) that the floor plan's route runs into, and the
+    /// measure says `GoForward`: the path point this far ahead (arc length) decides, as the
+    /// paper's DLM does from the path's local curvature. `TurnLeft`/`TurnRight` towards it
+    /// while its bearing from the heading is at least `sidestep_turn_rad`, held down to half
+    /// that. The measures turn on the floor plan's route, which runs straight into the cabinet:
+    /// told `go_forward`, DLM-Net r49 kept to the corridor's middle and clipped task C's
+    /// cabinet in 9 runs of 10 (round 51).
     /// 0: never, as before round 51; 2.0 (the default): what the shipped DLM-Net r49 drives on
     /// since round 51 (its card's `dlm_params`).
     pub sidestep_ahead_m: f64,
