@@ -1,0 +1,120 @@
+//! Criterion benchmark of the DLM's sidestep (planner `[dlm] sidestep_ahead_m`, round 51) on its
+//! hot path: a robot on the corridor's centre line (sim/scenarios/maps/corridor) drives up to a
+//! cabinet its laser sees, answered every 0.2 m, with the rule off (0) and on (2.0, the
+//! default) in the same run. `dlm_on_*` times the DLM alone over the approach's 21 answered
+//! paths (the rule adds a check of the path and, near the cabinet, a second floor-plan route);
+//! `answers_*` times the whole approach through the intention pipeline, a fresh planner each
+//! time (its searches round the cabinet included).
+
+// A benchmark harness has no caller to hand errors to: failing loudly is the intent.
+#![allow(clippy::expect_used, clippy::unwrap_used)]
+
+use std::sync::Arc;
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use map_store::{load_ros_map, ImportLimits};
+use planning::intention::dlm_on_map;
+use planning::PlanningMap;
+use planning::{Answer, Disc, DlmParams, Goal, GoalProgress, IntentionConfig, IntentionPlanner};
+use protocol::{Header, MapName, MapRef, Pose2D, PoseEstimate};
+
+/// The face and sides of a cabinet standing out from the corridor's north wall to its centre
+/// line (x 11.6..12.4), as the agent's obstacle layer reports it: points 0.1 m apart.
+fn cabinet_points() -> Vec<[f64; 2]> {
+    let mut points: Vec<[f64; 2]> = (0..=8).map(|i| [11.6 + 0.1 * f64::from(i), 5.2]).collect();
+    for j in 1..=10 {
+        let y = 5.2 + 0.1 * f64::from(j);
+        points.push([11.6, y]);
+        points.push([12.4, y]);
+    }
+    points
+}
+
+fn estimate(pose: Pose2D, seq: u64) -> PoseEstimate {
+    PoseEstimate {
+        header: Header::new(seq, 1_000 + seq),
+        pose,
+        covariance: [0.0; 9],
+        sensor_stamp_ns: 1_000 + seq,
+        map: MapRef {
+            name: MapName::new("corridor").unwrap(),
+            version: 1,
+        },
+        unmapped_obstacles_m: cabinet_points(),
+    }
+}
+
+/// The approach: 4.6 m to 0.6 m short of the cabinet's face, heading east on y 5.2.
+fn approach() -> impl Iterator<Item = (u64, Pose2D)> {
+    (0..=20_u32).map(|k| {
+        (
+            u64::from(k) + 1,
+            Pose2D::new(7.0 + 0.2 * f64::from(k), 5.2, 0.0),
+        )
+    })
+}
+
+fn config(sidestep_ahead_m: f64) -> IntentionConfig {
+    let mut config = IntentionConfig::default();
+    config.dlm.sidestep_ahead_m = sidestep_ahead_m;
+    config
+}
+
+fn sidestep(c: &mut Criterion) {
+    let path = test_support::scenarios_dir().join("maps/corridor.yaml");
+    let ros = load_ros_map(&path, &ImportLimits::default()).expect("map loads");
+    let base = IntentionConfig::default();
+    let map = Arc::new(PlanningMap::new(ros.grid, &base.planner).expect("map prepares"));
+    let goals = [Goal::at(25.5, 5.2)];
+    let goal = Pose2D::new(25.5, 5.2, 0.0);
+    let drive = |config: IntentionConfig| {
+        let mut planner = IntentionPlanner::new(Arc::clone(&map), config).expect("planner");
+        let progress = GoalProgress::new(&goals, 0);
+        approach()
+            .map(
+                |(seq, pose)| match planner.answer(&estimate(pose, seq), &progress, false) {
+                    Answer::Heading { plan, .. } => (pose, plan.expect("a plan").path),
+                    Answer::Done => panic!("done at {pose:?}"),
+                },
+            )
+            .collect::<Vec<_>>()
+    };
+    let answered = drive(config(2.0));
+    let seen: Vec<Disc> = cabinet_points()
+        .iter()
+        .map(|&[x_m, y_m]| Disc {
+            x_m,
+            y_m,
+            radius_m: base.seen.radius_m,
+        })
+        .collect();
+
+    let mut group = c.benchmark_group("sidestep_corridor_cabinet");
+    group.sample_size(20);
+    for (name, ahead_m) in [("off", 0.0), ("on", 2.0)] {
+        let params = DlmParams {
+            sidestep_ahead_m: ahead_m,
+            ..base.dlm.clone()
+        };
+        group.bench_function(format!("dlm_on_map_x21_{name}"), |b| {
+            b.iter(|| {
+                let mut previous = None;
+                for (robot, path) in &answered {
+                    previous = Some(dlm_on_map(
+                        &map, path, *robot, goal, &params, previous, &seen,
+                    ));
+                }
+                previous
+            });
+        });
+    }
+    for (name, ahead_m) in [("off", 0.0), ("on", 2.0)] {
+        group.bench_function(format!("answers_x21_{name}"), |b| {
+            b.iter(|| drive(config(ahead_m)));
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, sidestep);
+criterion_main!(benches);
