@@ -253,8 +253,6 @@ pub struct Supervisor {
     hold_obs: Option<HoldObservation>,
     /// Whether the fallback drove the last cycle, or the recovery backed the robot off.
     recovering: bool,
-    /// Whether the recovery backed the robot straight off in the last cycle.
-    backing_up: bool,
     odometry: VecDeque<Odometry>,
     scan: Option<LaserScan>,
     /// What the collision monitor did in this cycle.
@@ -351,7 +349,6 @@ impl Supervisor {
             camera_hold,
             hold_obs: None,
             recovering: false,
-            backing_up: false,
             odometry: VecDeque::with_capacity(ODOM_HISTORY),
             scan: None,
             monitor: None,
@@ -617,7 +614,7 @@ impl Supervisor {
             }
         }
         let recovering = self.recovering && state == AgentState::Driving;
-        let backing_up = self.backing_up && recovering;
+        let backing_up = recovering && self.backing_up();
         self.cmd_v_mps = v;
         self.cmd_omega_radps = w;
         self.state = state;
@@ -650,7 +647,6 @@ impl Supervisor {
         }
         self.movers.reset();
         self.recovering = false;
-        self.backing_up = false;
     }
 
     /// Whether a stuck controller is relieved by the dynamic window (`[safety.recovery]` on
@@ -687,11 +683,16 @@ impl Supervisor {
         self.state == AgentState::Driving && self.give_way.as_ref().is_some_and(GiveWay::waiting)
     }
 
+    /// Whether the recovery backs the robot straight off now (the status's `backing_up`).
+    fn backing_up(&self) -> bool {
+        self.recovering && self.recovery.mode() == Mode::BackUp
+    }
+
     /// The controller that drives now: the configured one, or the dynamic window recovering
     /// (backing off, no controller drives: the configured one takes the robot on after).
     #[must_use]
     pub fn active_controller(&self) -> ControllerKind {
-        if self.recovering && !self.backing_up {
+        if self.recovering && !self.backing_up() {
             ControllerKind::DynamicWindow
         } else {
             self.config.controller
@@ -706,7 +707,6 @@ impl Supervisor {
         limits: &Limits,
     ) -> (Option<(f64, f64)>, AgentState, Option<StopReason>) {
         let stop = |reason| (None, AgentState::Stopping, Some(reason));
-        self.backing_up = false;
         let position_std_m = self.position_std_m();
         if position_std_m > self.config.safety.max_position_std_m || self.amcl.is_lost() {
             // Not finite only before the first estimate; the status needs a number.
@@ -848,7 +848,6 @@ impl Supervisor {
         if mode == Mode::BackUp {
             // Straight back the way the robot came; the controller takes it on afresh after.
             self.recovering = true;
-            self.backing_up = true;
             if let Some(shim) = &mut self.shim {
                 shim.reset();
             }
@@ -912,7 +911,7 @@ impl Supervisor {
             map: Some(self.map.clone()),
             localized: self.localized(),
             recovering: self.recovering,
-            backing_up: self.recovering && self.backing_up,
+            backing_up: self.backing_up(),
             rotating_in_place: self.rotating(),
             giving_way: self.giving_way(),
         }

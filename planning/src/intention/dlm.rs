@@ -329,11 +329,7 @@ fn curvature_of(rest: &[Pose2D], robot: Pose2D, window_m: f64) -> f64 {
             break;
         }
     }
-    let (s, c) = robot.yaw_rad.sin_cos();
-    let dx = target.x_m - robot.x_m;
-    let dy = target.y_m - robot.y_m;
-    let fwd = c * dx + s * dy;
-    let left = -s * dx + c * dy;
+    let (fwd, left) = in_robot_frame(robot, target);
     let d_sq = fwd * fwd + left * left;
     if d_sq < 1e-12 {
         return 0.0;
@@ -453,7 +449,7 @@ fn passes_near(poses: &[Pose2D], seen: &[Disc], reach_m: f64, berth_m: f64) -> b
             } else {
                 0.0
             };
-            (a.x_m + u * dx - d.x_m).hypot(a.y_m + u * dy - d.y_m) - d.radius_m <= berth_m
+            d.gap_m(a.x_m + u * dx, a.y_m + u * dy) <= berth_m
         });
         if near {
             return true;
@@ -480,14 +476,18 @@ fn sidestep_move(rest: &[Pose2D], robot: Pose2D, params: &DlmParams, previous: O
     }
 }
 
+/// `p` in the robot's frame: (ahead, to the left) in metres.
+fn in_robot_frame(robot: Pose2D, p: Pose2D) -> (f64, f64) {
+    let (s, c) = robot.yaw_rad.sin_cos();
+    let (dx, dy) = (p.x_m - robot.x_m, p.y_m - robot.y_m);
+    (c * dx + s * dy, -s * dx + c * dy)
+}
+
 /// The bearing (rad, left positive) from the robot's heading of the point of `poses` `ahead_m`
 /// along it; `None` when that point is not ahead of the robot (a turn on the spot is the
 /// rotation shim's business).
 fn bearing_ahead_rad(poses: &[Pose2D], robot: Pose2D, ahead_m: f64) -> Option<f64> {
-    let target = point_along(poses, ahead_m)?;
-    let (s, c) = robot.yaw_rad.sin_cos();
-    let (dx, dy) = (target.x_m - robot.x_m, target.y_m - robot.y_m);
-    let (fwd, left) = (c * dx + s * dy, -s * dx + c * dy);
+    let (fwd, left) = in_robot_frame(robot, point_along(poses, ahead_m)?);
     (fwd > 0.0).then(|| left.atan2(fwd))
 }
 
