@@ -290,11 +290,6 @@ pub struct TableArgs {
     /// what the DLM-Net's card says.
     #[arg(long)]
     dlm_sidestep_m: Option<f64>,
-    /// The planner's `dlm.inside_clearance_m` (m; 0: never): a turn whose inside, just ahead
-    /// of the robot's edge, comes this close to a wall or seen obstacle is told `go_forward`
-    /// until the robot has drawn past it; over what the DLM-Net's card says.
-    #[arg(long)]
-    dlm_inside_m: Option<f64>,
 }
 
 impl TableArgs {
@@ -433,11 +428,6 @@ pub struct RecordArgs {
     /// what the DLM-Net's card says.
     #[arg(long)]
     dlm_sidestep_m: Option<f64>,
-    /// The planner's `dlm.inside_clearance_m` (m; 0: never): a turn whose inside, just ahead
-    /// of the robot's edge, comes this close to a wall or seen obstacle is told `go_forward`
-    /// until the robot has drawn past it; over what the DLM-Net's card says.
-    #[arg(long)]
-    dlm_inside_m: Option<f64>,
     /// Output folder: index.json and shard_NNNNN/*.npy (training/DATASET.md).
     #[arg(long)]
     out: PathBuf,
@@ -497,9 +487,8 @@ fn dlm_params_for(
     }
 }
 
-/// `params` with `arrive_m`, `bearing_rad`, `blocked_m`, `sidestep_m` and `inside_m` (when
-/// given) as its `arrive_distance_m`, `arrive_bearing_rad`, `blocked_ahead_m`,
-/// `sidestep_ahead_m` and `inside_clearance_m`, warning when that changes
+/// `params` with `arrive_m`, `bearing_rad`, `blocked_m` and `sidestep_m` (when given) as its
+/// `arrive_distance_m`, `arrive_bearing_rad`, `blocked_ahead_m` and `sidestep_ahead_m`, warning when that changes
 /// what a card said; the intention pipeline's validation checks the values.
 fn with_overrides(
     params: planning::DlmParams,
@@ -507,7 +496,6 @@ fn with_overrides(
     bearing_rad: Option<f64>,
     blocked_m: Option<f64>,
     sidestep_m: Option<f64>,
-    inside_m: Option<f64>,
 ) -> planning::DlmParams {
     let mut out = params;
     for (given, field, name) in [
@@ -519,7 +507,6 @@ fn with_overrides(
         ),
         (blocked_m, &mut out.blocked_ahead_m, "--dlm-blocked-ahead-m"),
         (sidestep_m, &mut out.sidestep_ahead_m, "--dlm-sidestep-m"),
-        (inside_m, &mut out.inside_clearance_m, "--dlm-inside-m"),
     ] {
         if let Some(value) = given {
             if value.to_bits() != field.to_bits() {
@@ -624,7 +611,6 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
                 args.dlm_arrive_bearing_rad,
                 args.dlm_blocked_ahead_m,
                 args.dlm_sidestep_m,
-                args.dlm_inside_m,
             );
             run
         },
@@ -797,7 +783,6 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
                 args.dlm_arrive_bearing_rad,
                 args.dlm_blocked_ahead_m,
                 args.dlm_sidestep_m,
-                args.dlm_inside_m,
             );
             intention
         },

@@ -159,14 +159,6 @@ pub struct DlmParams {
     pub sidestep_ahead_m: f64,
     /// The bearing that starts the turn (see `sidestep_ahead_m`).
     pub sidestep_turn_rad: f64,
-    /// Where a turn is told and a wall or seen obstacle lies this close to the robot's edge on
-    /// the turn's inside, just ahead (the spot `robot_radius` to that side and
-    /// [`INSIDE_AHEAD_M`] on), the DLM is `GoForward` until the robot has drawn past it. Round
-    /// 52 found the turn round a thin wall's end (tasks D and E, a goal just before it) and
-    /// round task D's cabinet started with the robot's edge 0.1 m from the end, and DLM-Net
-    /// r49, told the turn all the way, cut in and touched it: 10 of its 28 interventions alone
-    /// over tasks A–E × 20. 0: never, as before round 52.
-    pub inside_clearance_m: f64,
 }
 
 impl Default for DlmParams {
@@ -193,7 +185,6 @@ impl Default for DlmParams {
             // DLM-Net r49's card since round 51.
             sidestep_ahead_m: 2.0,
             sidestep_turn_rad: 0.3,
-            inside_clearance_m: 0.0,
         }
     }
 }
@@ -230,7 +221,6 @@ impl DlmParams {
             arrive_bearing_rad: std::f64::consts::PI,
             blocked_ahead_m: 0.0,
             sidestep_ahead_m: 0.0,
-            inside_clearance_m: 0.0,
             ..Self::default()
         }
     }
@@ -264,7 +254,6 @@ impl DlmParams {
             ("blocked_turn_rad", self.blocked_turn_rad),
             ("sidestep_ahead_m", self.sidestep_ahead_m),
             ("sidestep_turn_rad", self.sidestep_turn_rad),
-            ("inside_clearance_m", self.inside_clearance_m),
         ] {
             if !value.is_finite() || value < 0.0 {
                 return Err(DlmParamsError {
@@ -407,65 +396,7 @@ pub fn dlm_on_map(
             params.blocked_ahead_m,
         ) < params.blocked_ahead_m;
     let dlm = decide(path, route.as_deref(), robot, params, previous, blocked);
-    let dlm = if dlm == Dlm::GoForward {
-        sidestep(map, path, robot, goal, params, previous, seen)
-    } else {
-        dlm
-    };
-    if cuts_inside(map, robot, dlm, params.inside_clearance_m, seen) {
-        return Dlm::GoForward;
-    }
-    dlm
-}
-
-/// How far ahead of the robot's centre the inside of a turn is checked
-/// ([`DlmParams::inside_clearance_m`]).
-pub const INSIDE_AHEAD_M: f64 = 0.3;
-
-/// Whether `dlm` is a turn whose inside, just ahead of the robot's edge, lies within
-/// `clearance_m` of a wall or one of the `seen` obstacles.
-fn cuts_inside(
-    map: &PlanningMap,
-    robot: Pose2D,
-    dlm: Dlm,
-    clearance_m: f64,
-    seen: &[Disc],
-) -> bool {
-    let side = match dlm {
-        Dlm::TurnLeft => 1.0,
-        Dlm::TurnRight => -1.0,
-        Dlm::GoForward | Dlm::Stop => return false,
-    };
-    if clearance_m <= 0.0 {
-        return false;
-    }
-    let (sin, cos) = robot.yaw_rad.sin_cos();
-    let r = map.robot_radius_m();
-    let (x_m, y_m) = (
-        robot.x_m + INSIDE_AHEAD_M * cos - side * r * sin,
-        robot.y_m + INSIDE_AHEAD_M * sin + side * r * cos,
-    );
-    let g = map.to_grid(Pose2D::new(x_m, y_m, robot.yaw_rad));
-    let wall_m = map.clearance_m(g.x_m, g.y_m);
-    let seen_m = seen
-        .iter()
-        .map(|d| d.gap_m(x_m, y_m))
-        .fold(f64::INFINITY, f64::min);
-    wall_m.min(seen_m) < clearance_m
-}
-
-/// The measure's `GoForward`, or the sidestep's turn ([`DlmParams::sidestep_ahead_m`]).
-fn sidestep(
-    map: &PlanningMap,
-    path: &[Pose2D],
-    robot: Pose2D,
-    goal: Pose2D,
-    params: &DlmParams,
-    previous: Option<Dlm>,
-    seen: &[Disc],
-) -> Dlm {
-    let dlm = Dlm::GoForward;
-    if params.sidestep_ahead_m <= 0.0 {
+    if dlm != Dlm::GoForward || params.sidestep_ahead_m <= 0.0 {
         return dlm;
     }
     let Some(closest) = crate::path::nearest_index(path, robot) else {
