@@ -63,7 +63,13 @@ SPEED_LABELS = ("command", "target", "lead")
 # motion may learn as a creep (round 48: DLM-Net c4 alone stood or turned at 0.03-0.09 rad/s
 # at task D's room exit and task E's goal 3; a fine-tune with "lead" did not beat c4 there).
 # Moving, target and command agree (|difference| > 0.3 on 2-4 % of frames).
-TURN_LABELS = ("command", "lead")
+# "spin": the target also where the expert means to stop and turn on the spot while the robot
+# still moves (target speed below SLOW_V), a goal reached with the way behind. There the
+# command is the learner's motion plus one bounded step: in round 50's furniture recording
+# (r49 driving), 822 turn frames moving at >= 0.35 m/s with a target of 0.01 (speed) and 0.89
+# (turn rate, of the limits) carry a command label of 0.71 and 0.36, and a network trained on
+# them brakes but turns at 0.3 (docs/evaluation.md, round 52).
+TURN_LABELS = ("command", "lead", "spin")
 # Normalised speed label below which a frame counts as slow (0.2 of 0.7 m/s: 0.14 m/s).
 SLOW_V = 0.2
 # Limits of the robot agent (robot-agent/src/config.rs Limits::default) for recordings whose
@@ -116,12 +122,16 @@ DEFAULT_LPE_RENDERING = {
 }
 
 
-def turn_leads(command: np.ndarray, target: np.ndarray) -> np.ndarray:
+def turn_leads(command: np.ndarray, target: np.ndarray, spin: bool = False) -> np.ndarray:
     """Where the "lead" turn label takes the expert's target turn rate (rows of normalised
     (v, omega)): the command's speed below SLOW_V and the target turning the same way as the
-    command (or the command not turning), harder."""
+    command (or the command not turning), harder. With `spin` ("spin"), also where the
+    target's speed is below SLOW_V (the expert means to turn on the spot)."""
     same_way = np.sign(target[:, 1]) * np.sign(command[:, 1]) >= 0
-    return (np.abs(command[:, 0]) < SLOW_V) & same_way & (np.abs(target[:, 1]) > np.abs(command[:, 1]))
+    slow = np.abs(command[:, 0]) < SLOW_V
+    if spin:
+        slow |= np.abs(target[:, 0]) < SLOW_V
+    return slow & same_way & (np.abs(target[:, 1]) > np.abs(command[:, 1]))
 
 
 class Pool:
@@ -209,9 +219,9 @@ class Pool:
                     "`eval record` stored the expert's target); record it again or train with the command's labels"
                 )
             target = np.concatenate([ds.field("target") for ds in self.sets]).astype(np.float32)
-            if turn_label == "lead":
+            if turn_label in ("lead", "spin"):
                 # Before the speed label changes: the rule reads the command's speed.
-                leads = turn_leads(self.label, target)
+                leads = turn_leads(self.label, target, spin=turn_label == "spin")
                 self.label[leads, 1] = target[leads, 1]
             if speed_label == "target":
                 self.label[:, 0] = target[:, 0]

@@ -98,7 +98,7 @@ def deviations(recipe: dict, model_config: dict, camera_px: int, lpe_px: int, in
     if recipe["balance"]:
         cells = "(DLM class, |omega| bin, slow/moving)" if recipe.get("balance_speed") else "(DLM class, |omega| bin)"
         d.append(f"balanced sampling: equal mass per {cells} cell, boost capped at 10x, instead of uniform")
-    turn_rate = "" if recipe.get("turn_label") == "lead" else "; turn rate the command's"
+    turn_rate = "" if recipe.get("turn_label") in ("lead", "spin") else "; turn rate the command's"
     if recipe.get("speed_label") == "target":
         d.append("speed label: the target speed the expert's command filter steers towards, not its filtered "
                  "command (which from rest is the current motion plus a bounded step)" + turn_rate)
@@ -109,6 +109,10 @@ def deviations(recipe: dict, model_config: dict, camera_px: int, lpe_px: int, in
         d.append("turn-rate label: the expert's target turn rate where the robot stands or crawls and the target "
                  "turns the same way harder than the filtered command (a DAgger label restarts from the learner's "
                  "own standstill), the command elsewhere")
+    if recipe.get("turn_label") == "spin":
+        d.append("turn-rate label: the expert's target turn rate where the robot stands or crawls or the expert "
+                 "means to stop (target speed slow) and the target turns the same way harder than the filtered "
+                 "command (a DAgger label restarts from the learner's own motion), the command elsewhere")
     if recipe["augment"]:
         d.append("photometric augmentation of the camera image (brightness, multiply, contrast, blur, noise, pixel dropout)")
     if kind == "dlm" and recipe["randomize_intention"] > 0:

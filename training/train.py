@@ -75,8 +75,9 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help="speed label: the expert's command (default), the target speed its filter steers towards, or "
                         "'lead', the larger of the two (recordings with a 'target' field); the turn rate: --turn-label")
     p.add_argument("--turn-label", choices=data.TURN_LABELS, default="command",
-                   help="turn-rate label: the expert's command (default), or 'lead', its target where the robot "
-                        "stands or crawls and the target turns the same way harder (recordings with a 'target' field)")
+                   help="turn-rate label: the expert's command (default); 'lead', its target where the robot "
+                        "stands or crawls and the target turns the same way harder; 'spin', also where the target "
+                        "speed is slow (the expert means to turn on the spot); recordings with a 'target' field")
     p.add_argument("--augment", action=argparse.BooleanOptionalAction, default=None,
                    help="photometric augmentation of the camera image (default on; paper off)")
     p.add_argument("--randomize-intention", type=float,

@@ -128,6 +128,23 @@ def check(root: Path) -> None:
     assert np.all(np.sign(target[took, 1]) * np.sign(command[took, 1]) >= 0)
     moving = np.abs(command[:, 0]) >= data.SLOW_V
     assert np.array_equal(turned.label[moving, 1], command[moving, 1])
+    # "spin": "lead", and also where the robot moves but the expert means to stop and turn.
+    spun = data.Pool([str(root)], speed_label="target", turn_label="spin")
+    spun_took = spun.label[:, 1] != command[:, 1]
+    assert np.all(spun_took[took]), "spin dropped a frame lead takes"
+    assert np.array_equal(spun.label[spun_took, 1], target[spun_took, 1])
+    extra = spun_took & ~took
+    # A goal reached at speed with the way behind: the command still rolls on (0.71, 0.36), the
+    # target stops and turns (0.01, 0.89); "lead" keeps the command, "spin" takes the target.
+    # Braking for someone without a turn, or a target turning the other way, keeps the command.
+    cmd = np.array([[0.71, 0.36], [0.71, 0.36], [0.5, 0.0], [0.71, 0.36], [0.1, 0.2]], np.float32)
+    tgt = np.array([[0.01, 0.89], [0.5, 0.89], [0.0, 0.0], [0.01, -0.89], [0.5, 0.6]], np.float32)
+    assert data.turn_leads(cmd, tgt).tolist() == [False, False, False, False, True]
+    assert data.turn_leads(cmd, tgt, spin=True).tolist() == [True, False, False, False, True]
+    assert np.all(np.abs(target[extra, 0]) < data.SLOW_V)
+    assert np.all(np.abs(target[extra, 1]) > np.abs(command[extra, 1]))
+    stays = (np.abs(command[:, 0]) >= data.SLOW_V) & (np.abs(target[:, 0]) >= data.SLOW_V)
+    assert np.array_equal(spun.label[stays, 1], command[stays, 1])
     only_turn = data.Pool([str(root)], turn_label="lead")
     assert np.array_equal(only_turn.label[:, 0], command[:, 0])
     assert np.array_equal(only_turn.label[:, 1], turned.label[:, 1])
@@ -139,6 +156,8 @@ def check(root: Path) -> None:
     both = {**r, "turn_label": "lead"}
     said = recipe.deviations(both, {"kind": "dlm"}, 128, 128, [], None)
     assert any("turn-rate label" in d for d in said) and not any("turn rate the command's" in d for d in said), said
+    said = recipe.deviations({**r, "turn_label": "spin"}, {"kind": "dlm"}, 128, 128, [], None)
+    assert any("means to stop" in d for d in said) and not any("turn rate the command's" in d for d in said), said
     assert any("target speed" in d for d in recipe.deviations(r, {"kind": "lpe"}, 128, 128, [], None))
     older = root.parent / "older"
     shutil.copytree(root, older)
