@@ -16,7 +16,7 @@ use map_store::{load_ros_map, ImportLimits};
 use planning::intention::dlm_on_map;
 use planning::PlanningMap;
 use planning::{Answer, Disc, DlmParams, Goal, GoalProgress, IntentionConfig, IntentionPlanner};
-use protocol::{Header, MapName, MapRef, Pose2D, PoseEstimate};
+use protocol::{Pose2D, PoseEstimate};
 
 /// The face and sides of a cabinet standing out from the corridor's north wall to its centre
 /// line (x 11.6..12.4), as the agent's obstacle layer reports it: points 0.1 m apart.
@@ -31,17 +31,7 @@ fn cabinet_points() -> Vec<[f64; 2]> {
 }
 
 fn estimate(pose: Pose2D, seq: u64) -> PoseEstimate {
-    PoseEstimate {
-        header: Header::new(seq, 1_000 + seq),
-        pose,
-        covariance: [0.0; 9],
-        sensor_stamp_ns: 1_000 + seq,
-        map: MapRef {
-            name: MapName::new("corridor").unwrap(),
-            version: 1,
-        },
-        unmapped_obstacles_m: cabinet_points(),
-    }
+    test_support::fixtures::pose_estimate("corridor", pose, seq, cabinet_points())
 }
 
 /// The approach: 4.6 m to 0.6 m short of the cabinet's face, heading east on y 5.2.

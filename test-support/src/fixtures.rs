@@ -1,7 +1,7 @@
-//! Message fixtures: an intention along a path, the way controller tests and benchmarks feed
-//! one, without writing every field of the wire message again.
+//! Message fixtures: an intention along a path, or a pose estimate, the way controller and
+//! planner tests and benchmarks feed one, without writing every field of the wire message again.
 
-use protocol::{Dlm, Header, Image, Intention, MapName, MapRef, Pose2D};
+use protocol::{Dlm, Header, Image, Intention, MapName, MapRef, Pose2D, PoseEstimate};
 
 /// Version 1 of the map `name`.
 #[must_use]
@@ -9,6 +9,25 @@ pub fn map_ref(name: &str) -> MapRef {
     MapRef {
         name: MapName::new(name).expect("a valid map name"),
         version: 1,
+    }
+}
+
+/// A pose estimate numbered `seq` (stamped 1000 + `seq` ns) on version 1 of map `map`, with no
+/// covariance and the agent reporting `unmapped_obstacles_m` (map frame).
+#[must_use]
+pub fn pose_estimate(
+    map: &str,
+    pose: Pose2D,
+    seq: u64,
+    unmapped_obstacles_m: Vec<[f64; 2]>,
+) -> PoseEstimate {
+    PoseEstimate {
+        header: Header::new(seq, 1_000 + seq),
+        pose,
+        covariance: [0.0; 9],
+        sensor_stamp_ns: 1_000 + seq,
+        map: map_ref(map),
+        unmapped_obstacles_m,
     }
 }
 
