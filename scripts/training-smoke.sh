@@ -46,3 +46,4 @@ fi
 "$PY" training/tests/test_export_drive.py
 "$PY" training/tests/test_recard.py
 "$PY" training/tests/test_setoff_plot.py
+"$PY" training/tests/test_leg_plot.py

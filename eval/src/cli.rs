@@ -290,6 +290,11 @@ pub struct TableArgs {
     /// what the DLM-Net's card says.
     #[arg(long)]
     dlm_sidestep_m: Option<f64>,
+    /// The planner's `dlm.about_turn_rad` (rad; 0: never): where the route leaves at least this
+    /// far off the heading, the turn round is told towards the side the walls close in; over
+    /// what the DLM-Net's card says.
+    #[arg(long)]
+    dlm_about_turn_rad: Option<f64>,
 }
 
 impl TableArgs {
@@ -428,6 +433,10 @@ pub struct RecordArgs {
     /// what the DLM-Net's card says.
     #[arg(long)]
     dlm_sidestep_m: Option<f64>,
+    /// The planner's `dlm.about_turn_rad` (rad; 0: never), over what the `--policy` DLM-Net's
+    /// card says.
+    #[arg(long)]
+    dlm_about_turn_rad: Option<f64>,
     /// Output folder: index.json and shard_NNNNN/*.npy (training/DATASET.md).
     #[arg(long)]
     out: PathBuf,
@@ -487,15 +496,17 @@ fn dlm_params_for(
     }
 }
 
-/// `params` with `arrive_m`, `bearing_rad`, `blocked_m` and `sidestep_m` (when given) as its
-/// `arrive_distance_m`, `arrive_bearing_rad`, `blocked_ahead_m` and `sidestep_ahead_m`, warning when that changes
-/// what a card said; the intention pipeline's validation checks the values.
+/// `params` with `arrive_m`, `bearing_rad`, `blocked_m`, `sidestep_m` and `about_rad` (when
+/// given) as its `arrive_distance_m`, `arrive_bearing_rad`, `blocked_ahead_m`,
+/// `sidestep_ahead_m` and `about_turn_rad`, warning when that changes what a card said; the
+/// intention pipeline's validation checks the values.
 fn with_overrides(
     params: planning::DlmParams,
     arrive_m: Option<f64>,
     bearing_rad: Option<f64>,
     blocked_m: Option<f64>,
     sidestep_m: Option<f64>,
+    about_rad: Option<f64>,
 ) -> planning::DlmParams {
     let mut out = params;
     for (given, field, name) in [
@@ -507,6 +518,7 @@ fn with_overrides(
         ),
         (blocked_m, &mut out.blocked_ahead_m, "--dlm-blocked-ahead-m"),
         (sidestep_m, &mut out.sidestep_ahead_m, "--dlm-sidestep-m"),
+        (about_rad, &mut out.about_turn_rad, "--dlm-about-turn-rad"),
     ] {
         if let Some(value) = given {
             if value.to_bits() != field.to_bits() {
@@ -611,6 +623,7 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<()> {
                 args.dlm_arrive_bearing_rad,
                 args.dlm_blocked_ahead_m,
                 args.dlm_sidestep_m,
+                args.dlm_about_turn_rad,
             );
             run
         },
@@ -783,6 +796,7 @@ fn run_table(args: &TableArgs) -> anyhow::Result<()> {
                 args.dlm_arrive_bearing_rad,
                 args.dlm_blocked_ahead_m,
                 args.dlm_sidestep_m,
+                args.dlm_about_turn_rad,
             );
             intention
         },

@@ -1012,3 +1012,66 @@ fn a_seen_box_in_a_corner_the_route_turns_round_changes_no_dlm() {
         assert_eq!(dlm(&config.dlm), Dlm::GoForward, "after {previous:?}");
     }
 }
+
+/// The DLM the pipeline tells a robot at `robot` on the way to `goal` on scenario map `map`,
+/// with `dlm.about_turn_rad` at `about_turn_rad`.
+fn told(map: &str, about_turn_rad: f64, robot: Pose2D, goal: Goal) -> Dlm {
+    let mut config = IntentionConfig::default();
+    config.dlm.about_turn_rad = about_turn_rad;
+    let mut planner = IntentionPlanner::new(scenario_map(map, &config), config).unwrap();
+    let goals = [goal];
+    match planner.answer(&estimate(robot, 1), &GoalProgress::new(&goals, 0), false) {
+        Answer::Heading { plan: Ok(p), .. } => p.dlm,
+        other => panic!("no plan from {robot:?}: {other:?}"),
+    }
+}
+
+/// A robot that has just reached a goal and must turn round for the next is told the turn
+/// towards the side where the floor plan closes in, not the side the route lies on by a hair
+/// (`dlm.about_turn_rad`): told the turn towards an open passage, DLM-Net r49 drove into it as
+/// into a junction ahead (16 of its 28 interventions alone over tasks A–E × 20, round 52). The
+/// poses are where r49 reached task E's goals 3 and 2 and task C's goal 2.
+#[test]
+fn a_robot_turning_round_after_a_goal_is_told_the_side_of_the_wall() {
+    let about = std::f64::consts::PI - 0.55;
+    // Task E's goal 3, reached heading west: the next leg starts back east. The wall is to the
+    // north, 0.9 m off; south-west, the passage towards the start lies open.
+    let e3 = Goal::at(1.6, 17.2);
+    for yaw_rad in [-3.0, 3.1] {
+        let robot = Pose2D::new(12.19, 9.5, yaw_rad);
+        assert_eq!(told("maze", about, robot, e3), Dlm::TurnRight, "{yaw_rad}");
+    }
+    // Turning right on the spot, it hears the same side all the way round.
+    for turned_rad in [0.2, 0.6, 1.2, 2.0] {
+        let robot = Pose2D::new(12.19, 9.5, -3.0 - turned_rad);
+        assert_eq!(
+            told("maze", about, robot, e3),
+            Dlm::TurnRight,
+            "{turned_rad}"
+        );
+    }
+    // Off, as before round 53: the route's side by a hair, the open passage's.
+    assert_eq!(
+        told("maze", 0.0, Pose2D::new(12.19, 9.5, -3.0), e3),
+        Dlm::TurnLeft
+    );
+    // Task E's goal 2, reached heading south by the east wall; the bottom corridor runs west.
+    let robot = Pose2D::new(25.0, 1.9, -std::f64::consts::FRAC_PI_2);
+    assert_eq!(
+        told("maze", about, robot, Goal::at(12.0, 9.4)),
+        Dlm::TurnLeft
+    );
+    // Task C's goal 2 in the outer corridor's north-east corner, reached heading north: the
+    // next leg starts back south, and the north corridor runs west.
+    let robot = Pose2D::new(32.8, 22.7, std::f64::consts::FRAC_PI_2);
+    assert_eq!(
+        told("hospital", about, robot, Goal::at(8.0, 8.0)),
+        Dlm::TurnRight
+    );
+    // Out of range, named.
+    let bad = DlmParams {
+        about_turn_rad: 4.0,
+        ..DlmParams::default()
+    };
+    assert_eq!(bad.validate().unwrap_err().field, "about_turn_rad");
+}
