@@ -22,6 +22,8 @@ import json
 import math
 from pathlib import Path
 
+import run_log
+
 # A jump of the true pose larger than this between two messages is the judge carrying the robot.
 JUMP_M = 0.3
 
@@ -29,18 +31,13 @@ JUMP_M = 0.3
 def leg(path: Path, goal_index: int, span_s: float) -> tuple[float | None, list[tuple[float, float]]]:
     """When the intention first named `goal_index` (s, the log's stamps) and the true (x, y) of
     the `span_s` after it; (None, []) when it never did."""
-    from mcap.reader import make_reader
-
     start, trace = None, []
-    with open(path, "rb") as f:
-        for _, channel, message in make_reader(f).iter_messages(topics=["/intention", "/ground_truth"]):
-            d = json.loads(message.data)
-            t = d["header"]["stamp_ns"] / 1e9
-            if channel.topic == "/intention":
-                if start is None and d.get("goal_index") == goal_index:
-                    start = t
-            elif start is not None and t <= start + span_s:
-                trace.append((d["pose"]["x_m"], d["pose"]["y_m"]))
+    for topic, t, d in run_log.messages(path, ["/intention", "/ground_truth"]):
+        if topic == "/intention":
+            if start is None and d.get("goal_index") == goal_index:
+                start = t
+        elif start is not None and t <= start + span_s:
+            trace.append((d["pose"]["x_m"], d["pose"]["y_m"]))
     return start, trace
 
 
@@ -136,7 +133,9 @@ def main(argv=None) -> int:
                  "(green: start; red: runs with an intervention; x: where)", fontsize=9)
     fig.tight_layout()
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(args.out, dpi=110)
+    tmp = args.out.with_name(args.out.name + ".tmp.png")
+    fig.savefig(tmp, dpi=110)
+    tmp.replace(args.out)
     print(f"wrote {args.out}")
     return 0
 

@@ -15,9 +15,10 @@ speed was back at 0.3 m/s after it. Needs mcap (scripts/setup.sh installs it) an
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from pathlib import Path
+
+import run_log
 
 TURN_RADPS = 0.5
 MOVING_MPS = 0.3
@@ -25,17 +26,12 @@ MOVING_MPS = 0.3
 
 def read_log(path: Path) -> tuple[list[tuple[float, float, float]], list[tuple[float, float, float]]]:
     """(t, v, omega) of /cmd_vel and (t, x, y) of /ground_truth, in stamp order."""
-    from mcap.reader import make_reader
-
     cmd, pose = [], []
-    with open(path, "rb") as f:
-        for _, channel, message in make_reader(f).iter_messages(topics=["/cmd_vel", "/ground_truth"]):
-            d = json.loads(message.data)
-            t = d["header"]["stamp_ns"] / 1e9
-            if channel.topic == "/cmd_vel":
-                cmd.append((t, d["v_mps"], d["omega_radps"]))
-            else:
-                pose.append((t, d["pose"]["x_m"], d["pose"]["y_m"]))
+    for topic, t, d in run_log.messages(path, ["/cmd_vel", "/ground_truth"]):
+        if topic == "/cmd_vel":
+            cmd.append((t, d["v_mps"], d["omega_radps"]))
+        else:
+            pose.append((t, d["pose"]["x_m"], d["pose"]["y_m"]))
     return cmd, pose
 
 

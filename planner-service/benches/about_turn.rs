@@ -10,13 +10,11 @@
 // A benchmark harness has no caller to hand errors to: failing loudly is the intent.
 #![allow(clippy::expect_used, clippy::unwrap_used)]
 
-use std::sync::Arc;
+mod common;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use map_store::{load_ros_map, ImportLimits};
 use planning::intention::dlm_on_map;
-use planning::PlanningMap;
-use planning::{Answer, DlmParams, Goal, GoalProgress, IntentionConfig, IntentionPlanner};
+use planning::{DlmParams, Goal, IntentionConfig};
 use protocol::Pose2D;
 
 /// The turn: from heading west (-3.0 rad) 2 rad clockwise, every 0.1 rad.
@@ -36,25 +34,12 @@ fn config(about_turn_rad: f64) -> IntentionConfig {
 }
 
 fn about_turn(c: &mut Criterion) {
-    let path = test_support::scenarios_dir().join("maps/maze.yaml");
-    let ros = load_ros_map(&path, &ImportLimits::default()).expect("map loads");
     let base = IntentionConfig::default();
-    let map = Arc::new(PlanningMap::new(ros.grid, &base.planner).expect("map prepares"));
+    let map = common::scenario_map("maze");
     let goals = [Goal::at(1.6, 17.2)];
     let goal = Pose2D::new(1.6, 17.2, 0.0);
-    let drive = |config: IntentionConfig| {
-        let mut planner = IntentionPlanner::new(Arc::clone(&map), config).expect("planner");
-        let progress = GoalProgress::new(&goals, 0);
-        turn()
-            .map(|(seq, pose)| {
-                let estimate = test_support::fixtures::pose_estimate("maze", pose, seq, Vec::new());
-                match planner.answer(&estimate, &progress, false) {
-                    Answer::Heading { plan, .. } => (pose, plan.expect("a plan").path),
-                    Answer::Done => panic!("done at {pose:?}"),
-                }
-            })
-            .collect::<Vec<_>>()
-    };
+    let drive =
+        |config: IntentionConfig| common::answered(&map, "maze", config, &goals, turn(), &[]);
     let answered = drive(config(2.6));
 
     let mut group = c.benchmark_group("about_turn_maze_goal_3");

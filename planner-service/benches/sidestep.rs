@@ -9,14 +9,12 @@
 // A benchmark harness has no caller to hand errors to: failing loudly is the intent.
 #![allow(clippy::expect_used, clippy::unwrap_used)]
 
-use std::sync::Arc;
+mod common;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use map_store::{load_ros_map, ImportLimits};
 use planning::intention::dlm_on_map;
-use planning::PlanningMap;
-use planning::{Answer, Disc, DlmParams, Goal, GoalProgress, IntentionConfig, IntentionPlanner};
-use protocol::{Pose2D, PoseEstimate};
+use planning::{Disc, DlmParams, Goal, IntentionConfig};
+use protocol::Pose2D;
 
 /// The face and sides of a cabinet standing out from the corridor's north wall to its centre
 /// line (x 11.6..12.4), as the agent's obstacle layer reports it: points 0.1 m apart.
@@ -28,10 +26,6 @@ fn cabinet_points() -> Vec<[f64; 2]> {
         points.push([12.4, y]);
     }
     points
-}
-
-fn estimate(pose: Pose2D, seq: u64) -> PoseEstimate {
-    test_support::fixtures::pose_estimate("corridor", pose, seq, cabinet_points())
 }
 
 /// The approach: 4.6 m to 0.6 m short of the cabinet's face, heading east on y 5.2.
@@ -51,23 +45,13 @@ fn config(sidestep_ahead_m: f64) -> IntentionConfig {
 }
 
 fn sidestep(c: &mut Criterion) {
-    let path = test_support::scenarios_dir().join("maps/corridor.yaml");
-    let ros = load_ros_map(&path, &ImportLimits::default()).expect("map loads");
     let base = IntentionConfig::default();
-    let map = Arc::new(PlanningMap::new(ros.grid, &base.planner).expect("map prepares"));
+    let map = common::scenario_map("corridor");
     let goals = [Goal::at(25.5, 5.2)];
     let goal = Pose2D::new(25.5, 5.2, 0.0);
+    let cabinet = cabinet_points();
     let drive = |config: IntentionConfig| {
-        let mut planner = IntentionPlanner::new(Arc::clone(&map), config).expect("planner");
-        let progress = GoalProgress::new(&goals, 0);
-        approach()
-            .map(
-                |(seq, pose)| match planner.answer(&estimate(pose, seq), &progress, false) {
-                    Answer::Heading { plan, .. } => (pose, plan.expect("a plan").path),
-                    Answer::Done => panic!("done at {pose:?}"),
-                },
-            )
-            .collect::<Vec<_>>()
+        common::answered(&map, "corridor", config, &goals, approach(), &cabinet)
     };
     let answered = drive(config(2.0));
     let seen: Vec<Disc> = cabinet_points()

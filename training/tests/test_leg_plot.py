@@ -18,27 +18,19 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "scripts"))
 
 import leg_plot  # noqa: E402
+import run_log  # noqa: E402
 
 
 def write_log(path: Path) -> None:
-    from mcap.writer import Writer
-
-    with open(path, "wb") as f:
-        w = Writer(f)
-        w.start()
-        schemas = {name: w.register_schema(name=name, encoding="jsonschema", data=b"{}") for name in ("fleet.Intention", "fleet.StampedPose")}
-        intention = w.register_channel(topic="/intention", message_encoding="json", schema_id=schemas["fleet.Intention"])
-        truth = w.register_channel(topic="/ground_truth", message_encoding="json", schema_id=schemas["fleet.StampedPose"])
+    def records():
         for k in range(100):  # 10 s at 10 Hz
             t = k / 10
             x = 0.05 * k + (1.0 if t >= 6 else 0.0)
-            stamp = int(round(t * 1e9))
-            header = {"seq": k, "stamp_ns": stamp}
-            w.add_message(truth, log_time=stamp, publish_time=stamp, data=json.dumps(
-                {"header": header, "pose": {"x_m": x, "y_m": 1.0, "yaw_rad": 0.0}}).encode())
-            w.add_message(intention, log_time=stamp, publish_time=stamp, data=json.dumps(
-                {"header": header, "goal_index": 0 if t < 4 else 1, "dlm": "go_forward"}).encode())
-        w.finish()
+            header = {"seq": k, "stamp_ns": int(round(t * 1e9))}
+            yield "/ground_truth", {"header": header, "pose": {"x_m": x, "y_m": 1.0, "yaw_rad": 0.0}}
+            yield "/intention", {"header": header, "goal_index": 0 if t < 4 else 1, "dlm": "go_forward"}
+
+    run_log.write(path, {"/intention": "fleet.Intention", "/ground_truth": "fleet.StampedPose"}, records())
 
 
 def main() -> None:

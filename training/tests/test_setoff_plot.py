@@ -9,7 +9,6 @@ a point never reached is refused, naming it.
 
 from __future__ import annotations
 
-import json
 import sys
 import tempfile
 from pathlib import Path
@@ -17,29 +16,21 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "scripts"))
 
+import run_log  # noqa: E402
 import setoff_plot  # noqa: E402
 
 
 def write_log(path: Path) -> None:
-    from mcap.writer import Writer
-
-    with open(path, "wb") as f:
-        w = Writer(f)
-        w.start()
-        schemas = {name: w.register_schema(name=name, encoding="jsonschema", data=b"{}") for name in ("fleet.CmdVel", "fleet.StampedPose")}
-        cmd = w.register_channel(topic="/cmd_vel", message_encoding="json", schema_id=schemas["fleet.CmdVel"])
-        truth = w.register_channel(topic="/ground_truth", message_encoding="json", schema_id=schemas["fleet.StampedPose"])
+    def records():
         for k in range(200):  # 20 s at 10 Hz
             t = k / 10
             v, w_ = (0.5, 0.0) if t < 10 else ((0.0, 1.0) if 11 <= t < 13 else ((0.6, 0.0) if t >= 13 else (0.0, 0.0)))
             x = 0.05 * min(k, 100)
-            stamp = int(round(t * 1e9))
-            header = {"seq": k, "stamp_ns": stamp}
-            w.add_message(truth, log_time=stamp, publish_time=stamp, data=json.dumps(
-                {"header": header, "pose": {"x_m": x, "y_m": 0.0, "yaw_rad": 0.0}}).encode())
-            w.add_message(cmd, log_time=stamp, publish_time=stamp, data=json.dumps(
-                {"header": header, "v_mps": v, "omega_radps": w_}).encode())
-        w.finish()
+            header = {"seq": k, "stamp_ns": int(round(t * 1e9))}
+            yield "/ground_truth", {"header": header, "pose": {"x_m": x, "y_m": 0.0, "yaw_rad": 0.0}}
+            yield "/cmd_vel", {"header": header, "v_mps": v, "omega_radps": w_}
+
+    run_log.write(path, {"/cmd_vel": "fleet.CmdVel", "/ground_truth": "fleet.StampedPose"}, records())
 
 
 def main() -> None:
