@@ -41,6 +41,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import ros_map
+
 try:
     import amcl
     from mcap.reader import make_reader
@@ -154,16 +156,9 @@ def read_pgm(path: Path):
 
 def load_ros_map(yaml_path: Path):
     """A ROS map (YAML + PGM) as Nav2's grid: rows bottom-up, 0 free / 100 occupied / -1 unknown."""
-    meta = {}
-    for line in yaml_path.read_text().splitlines():
-        line = line.split("#", 1)[0].strip()
-        if ":" in line:
-            k, v = line.split(":", 1)
-            meta[k.strip()] = v.strip()
-    origin = [float(x) for x in meta["origin"].strip("[]").split(",")]
-    negate = int(meta.get("negate", "0"))
-    occ_t, free_t = float(meta.get("occupied_thresh", "0.65")), float(meta.get("free_thresh", "0.196"))
-    width, height, maxval, pixels = read_pgm(yaml_path.parent / meta["image"].strip("'\""))
+    meta = ros_map.read_yaml(yaml_path)
+    negate, occ_t, free_t = meta["negate"], meta["occupied_thresh"], meta["free_thresh"]
+    width, height, maxval, pixels = read_pgm(meta["image"])
     rows = []
     for r in range(height - 1, -1, -1):  # the image's top row is the map's last
         row = []
@@ -172,7 +167,7 @@ def load_ros_map(yaml_path: Path):
             occ = p if negate else 1.0 - p
             row.append(100 if occ > occ_t else 0 if occ < free_t else -1)
         rows.append(row)
-    return rows, float(meta["resolution"]), origin[0], origin[1]
+    return rows, meta["resolution_m"], meta["origin_m"][0], meta["origin_m"][1]
 
 
 # ----- Nav2's filter -----------------------------------------------------------------------

@@ -22,6 +22,7 @@ import json
 import math
 from pathlib import Path
 
+import ros_map
 import run_log
 
 # A jump of the true pose larger than this between two messages is the judge carrying the robot.
@@ -59,23 +60,13 @@ def interventions(table: Path, task: str) -> dict[int, list[dict]]:
 
 
 def floor_plan(yaml_path: Path):
-    """The ROS map's image (grey levels) and its extent in metres (left, right, bottom, top).
-    The map YAML's three keys read by hand: the file is flat, and PyYAML is not a dependency."""
+    """The ROS map's image (grey levels) and its extent in metres (left, right, bottom, top)."""
     import numpy as np
     from PIL import Image
 
-    meta = {}
-    for line in yaml_path.read_text().splitlines():
-        key, sep, value = line.split("#", 1)[0].partition(":")
-        if sep:
-            meta[key.strip()] = value.strip()
-    try:
-        image = meta["image"].strip("'\"")
-        res = float(meta["resolution"])
-        x0, y0 = (float(v) for v in meta["origin"].strip("[]").split(",")[:2])
-    except (KeyError, ValueError) as e:
-        raise SystemExit(f"{yaml_path}: not a ROS map YAML with image, resolution and origin ({e})") from e
-    img = np.array(Image.open(yaml_path.parent / image).convert("L"))
+    meta = ros_map.read_yaml(yaml_path)
+    img = np.array(Image.open(meta["image"]).convert("L"))
+    (x0, y0), res = meta["origin_m"], meta["resolution_m"]
     return img, (x0, x0 + img.shape[1] * res, y0, y0 + img.shape[0] * res)
 
 
