@@ -9,6 +9,10 @@ and after the fine-tune (WiSE-FT, Wortsman et al., CVPR 2022; "model soups", ICM
 keeps what each got right. It only works between models of one lineage (one warm-started from
 the other), whose weights lie in one basin; the closed-loop table decides whether it did.
 
+`--keep-first PREFIX` (repeatable) leaves the initializers under a name prefix as the first
+model's, e.g. `heads.0` and `heads.1`, a DLM-Net's `turn_left` and `turn_right` heads (round 54:
+to tell whether what a fine-tune broke lives in those heads or in the shared layers).
+
 The average is taken over the ONNX initializers as exported, with batch norms folded into the
 convolutions: a weighted mean of each member's folded weights. That is a model of its own, not
 the fold of averaged unfolded weights, and it is what the table measured and what ships.
@@ -104,9 +108,18 @@ def same_graph(a: onnx.ModelProto, b: onnx.ModelProto, name_b: str) -> None:
             raise AverageError(f"average: initializer {k} is {list(u.dims)} in {name_b}, {list(t.dims)} in the first model")
 
 
+def kept(name: str, keep_first: list[str]) -> bool:
+    """Whether initializer `name` lies under one of the `keep_first` prefixes (`heads.0` keeps
+    `heads.0.0.weight`, not `heads.01...`)."""
+    return any(name == k or name.startswith(k + ".") for k in keep_first)
+
+
 def average(members: list[tuple[Path, float | None]], out: Path, card_json: Path | None = None,
-            closed_loop: list[str | Path] | None = None, max_mb: float = MAX_MB) -> dict[str, str]:
-    """Averages, checks and writes `out`; returns the card."""
+            closed_loop: list[str | Path] | None = None, max_mb: float = MAX_MB,
+            keep_first: list[str] | None = None) -> dict[str, str]:
+    """Averages, checks and writes `out`; returns the card. Initializers under a `keep_first`
+    prefix are the first member's, not averaged."""
+    keep_first = list(keep_first or [])
     if len(members) < 2:
         raise AverageError("average: give at least two --model")
     given = [w for _, w in members]
@@ -145,10 +158,17 @@ def average(members: list[tuple[Path, float | None]], out: Path, card_json: Path
                 raise AverageError(f"average: card key {key} is {card.get(key)!r} in {path}, "
                                    f"{first_card.get(key)!r} in {members[0][0]}")
 
+    names = [t.name for t in first.graph.initializer]
+    for k in keep_first:
+        if not any(kept(n, [k]) for n in names):
+            raise AverageError(f"average: --keep-first {k}: no initializer of {members[0][0]} lies under it "
+                               f"(e.g. {', '.join(names[:4])})")
     arrays = [{t.name: numpy_helper.to_array(t) for t in p.graph.initializer} for p in protos]
     merged = onnx.ModelProto()
     merged.CopyFrom(first)
     for t in merged.graph.initializer:
+        if kept(t.name, keep_first):
+            continue
         values = [a[t.name] for a in arrays]
         if values[0].dtype.kind == "f":
             mean = np.tensordot(weights, np.stack(values).astype(np.float64), axes=1)
@@ -176,10 +196,12 @@ def average(members: list[tuple[Path, float | None]], out: Path, card_json: Path
     card["recipe"] = json.dumps({
         "method": "weighted mean of the initializers of exported models of one lineage (WiSE-FT)",
         "weights": [round(float(w), 6) for w in weights],
+        **({"kept_from_first": keep_first} if keep_first else {}),
         "member_recipes": [json.loads(c["recipe"]) if c.get("recipe") else None for c in cards],
     }, separators=(",", ":"), sort_keys=True)
     note = (f"weights: the weighted mean of {len(members)} exported models of one lineage "
-            f"({', '.join(f'{float(w):g}' for w in weights)}; WiSE-FT), batch norms folded before averaging")
+            f"({', '.join(f'{float(w):g}' for w in weights)}; WiSE-FT), batch norms folded before averaging"
+            + (f"; the initializers under {', '.join(keep_first)} are the first model's" if keep_first else ""))
     card["deviations"] = "; ".join(x for x in (first_card.get("deviations"), note) if x)
     if "parameters" in first_card:
         card["parameters"] = first_card["parameters"]
@@ -227,9 +249,12 @@ def main(argv=None) -> int:
     p.add_argument("--closed-loop", nargs="+", metavar="TABLE_JSON",
                    help="eval table results (table.json) whose rows for this network go into the card's closed_loop")
     p.add_argument("--max-mb", type=float, default=MAX_MB, help="refuse a larger model (default %(default)s)")
+    p.add_argument("--keep-first", action="append", metavar="PREFIX",
+                   help="initializers under this name prefix are the first model's, not averaged (repeat; e.g. "
+                        "heads.0 and heads.1, DLM-Net's turn_left and turn_right heads, training/data.py DLM_NAMES)")
     args = p.parse_args(argv)
     average([parse_member(m) for m in args.model], Path(args.out),
-            Path(args.card_json) if args.card_json else None, args.closed_loop, args.max_mb)
+            Path(args.card_json) if args.card_json else None, args.closed_loop, args.max_mb, args.keep_first)
     return 0
 
 

@@ -6,8 +6,10 @@
   averaged with the weights, every member named with its SHA-256, and it passes the agent's rules;
 * refused, naming what: models of different graphs (LPE-Net and DLM-Net), a card key the agent
   reads that differs (norm_mean; DLM parameters compared as parameters, so one the planner gained
-  later spelled out at its "as before" value is no difference), a negative weight, a missing file;
-  nothing is written then.
+  later spelled out at its "as before" value is no difference), a negative weight, a missing file,
+  a `--keep-first` prefix no initializer lies under; nothing is written then;
+* `--keep-first` (e.g. `heads.0`, a shipped DLM-Net's `turn_left` head): those initializers are the first model's bit for bit, the rest averaged,
+  and the card's recipe and deviations say so.
 
 Needs onnx, onnxruntime and torch (training.export's contract check). CI runs it
 (scripts/training-smoke.sh).
@@ -126,6 +128,24 @@ def test_average() -> None:
         blocked = tmp / "blocked.onnx"
         _scaled_copy(dlm, blocked, 1.0, {"dlm_params": json.dumps({**params, "blocked_ahead_m": 1.2})})
         _refused([(dlm, None), (blocked, None)], tmp / "r6.onnx", "dlm_params")
+        # Kept layers are the first model's, bit for bit; the rest is averaged; the card says so.
+        # (The fixture's initializers are flat names; a shipped network's are dotted, `heads.0.3.bias`.)
+        heads = tmp / "heads.onnx"
+        kept_names = ["fc2_w", "fc2_b"]
+        card = avg.average([(lpe, None), (scaled, None)], heads, keep_first=kept_names)
+        got = _floats(heads)
+        for k, a in want.items():
+            np.testing.assert_allclose(got[k], a if k in kept_names else 1.25 * a, rtol=1e-6, atol=1e-7, err_msg=k)
+        assert json.loads(card["recipe"])["kept_from_first"] == kept_names
+        assert "fc2_w, fc2_b" in card["deviations"]
+        assert not avg.kept("heads.01.weight", ["heads.0"]) and avg.kept("heads.0.3.bias", ["heads.0"])
+        try:
+            avg.average([(lpe, None), (scaled, None)], tmp / "r7.onnx", keep_first=["heads.9"])
+        except SystemExit as e:
+            assert "heads.9" in str(e), e
+            assert not (tmp / "r7.onnx").exists()
+        else:
+            raise AssertionError("an unknown --keep-first prefix was not refused")
         assert avg.parse_member("a/b.onnx:0.25") == (Path("a/b.onnx"), 0.25)
         assert avg.parse_member("a/b.onnx") == (Path("a/b.onnx"), None)
     print("training.average: ok")
