@@ -13,8 +13,7 @@
 mod common;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use planning::intention::dlm_on_map;
-use planning::{DlmParams, Goal, IntentionConfig};
+use planning::{Goal, IntentionConfig};
 use protocol::Pose2D;
 
 /// The turn: from heading west (-3.0 rad) 2 rad clockwise, every 0.1 rad.
@@ -34,37 +33,21 @@ fn config(about_turn_rad: f64) -> IntentionConfig {
 }
 
 fn about_turn(c: &mut Criterion) {
-    let base = IntentionConfig::default();
     let map = common::scenario_map("maze");
     let goals = [Goal::at(1.6, 17.2)];
     let goal = Pose2D::new(1.6, 17.2, 0.0);
     let drive =
         |config: IntentionConfig| common::answered(&map, "maze", config, &goals, turn(), &[]);
     let answered = drive(config(2.6));
-
-    let mut group = c.benchmark_group("about_turn_maze_goal_3");
-    group.sample_size(20);
-    for (name, about_rad) in [("off", 0.0), ("on", 2.6)] {
-        let params = DlmParams {
-            about_turn_rad: about_rad,
-            ..base.dlm.clone()
-        };
-        group.bench_function(format!("dlm_on_map_x21_{name}"), |b| {
-            b.iter(|| {
-                let mut previous = None;
-                for (robot, path) in &answered {
-                    previous = Some(dlm_on_map(&map, path, *robot, goal, &params, previous, &[]));
-                }
-                previous
-            });
-        });
-    }
-    for (name, about_rad) in [("off", 0.0), ("on", 2.6)] {
-        group.bench_function(format!("answers_x21_{name}"), |b| {
-            b.iter(|| drive(config(about_rad)));
-        });
-    }
-    group.finish();
+    common::rule_off_on(
+        c,
+        "about_turn_maze_goal_3",
+        &map,
+        &answered,
+        (goal, &[]),
+        [("off", config(0.0)), ("on", config(2.6))],
+        drive,
+    );
 }
 
 criterion_group!(benches, about_turn);

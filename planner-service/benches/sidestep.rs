@@ -12,8 +12,7 @@
 mod common;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use planning::intention::dlm_on_map;
-use planning::{Disc, DlmParams, Goal, IntentionConfig};
+use planning::{Disc, Goal, IntentionConfig};
 use protocol::Pose2D;
 
 /// The face and sides of a cabinet standing out from the corridor's north wall to its centre
@@ -63,31 +62,15 @@ fn sidestep(c: &mut Criterion) {
         })
         .collect();
 
-    let mut group = c.benchmark_group("sidestep_corridor_cabinet");
-    group.sample_size(20);
-    for (name, ahead_m) in [("off", 0.0), ("on", 2.0)] {
-        let params = DlmParams {
-            sidestep_ahead_m: ahead_m,
-            ..base.dlm.clone()
-        };
-        group.bench_function(format!("dlm_on_map_x21_{name}"), |b| {
-            b.iter(|| {
-                let mut previous = None;
-                for (robot, path) in &answered {
-                    previous = Some(dlm_on_map(
-                        &map, path, *robot, goal, &params, previous, &seen,
-                    ));
-                }
-                previous
-            });
-        });
-    }
-    for (name, ahead_m) in [("off", 0.0), ("on", 2.0)] {
-        group.bench_function(format!("answers_x21_{name}"), |b| {
-            b.iter(|| drive(config(ahead_m)));
-        });
-    }
-    group.finish();
+    common::rule_off_on(
+        c,
+        "sidestep_corridor_cabinet",
+        &map,
+        &answered,
+        (goal, &seen),
+        [("off", config(0.0)), ("on", config(2.0))],
+        drive,
+    );
 }
 
 criterion_group!(benches, sidestep);

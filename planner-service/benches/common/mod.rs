@@ -1,10 +1,12 @@
-//! What the DLM benchmarks share: a scenario's floor plan prepared for planning, and the paths
-//! the intention pipeline answers along a drive.
+//! What the DLM benchmarks share: a scenario's floor plan prepared for planning, the paths the
+//! intention pipeline answers along a drive, and a DLM rule timed off and on.
 
 use std::sync::Arc;
 
+use criterion::Criterion;
 use map_store::{load_ros_map, ImportLimits};
-use planning::{Answer, Goal, GoalProgress, IntentionConfig, IntentionPlanner, PlanningMap};
+use planning::intention::dlm_on_map;
+use planning::{Answer, Disc, Goal, GoalProgress, IntentionConfig, IntentionPlanner, PlanningMap};
 use protocol::Pose2D;
 
 /// Scenario map `name` (sim/scenarios/maps) prepared with the default planner configuration.
@@ -37,4 +39,46 @@ pub fn answered(
             }
         })
         .collect()
+}
+
+/// A DLM rule timed with each of `settings` (name, configuration; the rule off and on) in the
+/// criterion group `group_name`: `dlm_on_map_x21_<name>` the DLM alone over the `answered`
+/// drive's paths (towards `goal`, the laser seeing `seen`), `answers_x21_<name>` the whole drive
+/// through the intention pipeline (`drive`).
+pub fn rule_off_on<T>(
+    c: &mut Criterion,
+    group_name: &str,
+    map: &PlanningMap,
+    answered: &[(Pose2D, Vec<Pose2D>)],
+    (goal, seen): (Pose2D, &[Disc]),
+    settings: [(&str, IntentionConfig); 2],
+    drive: impl Fn(IntentionConfig) -> T,
+) {
+    let mut group = c.benchmark_group(group_name);
+    group.sample_size(20);
+    for (name, config) in &settings {
+        group.bench_function(format!("dlm_on_map_x21_{name}"), |b| {
+            b.iter(|| {
+                let mut previous = None;
+                for (robot, path) in answered {
+                    previous = Some(dlm_on_map(
+                        map,
+                        path,
+                        *robot,
+                        goal,
+                        &config.dlm,
+                        previous,
+                        seen,
+                    ));
+                }
+                previous
+            });
+        });
+    }
+    for (name, config) in &settings {
+        group.bench_function(format!("answers_x21_{name}"), |b| {
+            b.iter(|| drive(config.clone()));
+        });
+    }
+    group.finish();
 }
