@@ -82,7 +82,8 @@ DEFAULT_DLM_MEASURE = "curvature"
 # DLM parameters the planner gained after recordings wrote `dlm_params`, with the value that
 # means what those recordings had (planning DlmParams: no arriving Stop; once there was one,
 # at any bearing of the goal; no narrower turn angles before a wall, round 49; no sidestep round
-# what the laser sees, round 51; no side chosen by the walls for a turn round, round 53).
+# what the laser sees, round 51; no side chosen by the walls for a turn round, round 53; no turn
+# measured on the path round what the laser sees, round 55).
 ADDED_DLM_PARAMS = {
     "arrive_distance_m": 0.0,
     "arrive_bearing_rad": math.pi,
@@ -90,6 +91,7 @@ ADDED_DLM_PARAMS = {
     "blocked_turn_rad": 0.2,
     "sidestep_ahead_m": 0.0,
     "sidestep_turn_rad": 0.3,
+    "sidestep_over_turn_rad": 0.0,
     "about_turn_rad": 0.0,
 }
 

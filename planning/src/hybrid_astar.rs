@@ -7,7 +7,8 @@
 //! turns in place when enabled, each with its cost in metres. The heuristic is
 //! max(non-holonomic distance without obstacles, 2-D distance with obstacles); the latter is
 //! the per-goal cached [`super::heuristic::ObstacleHeuristic`]. Analytic expansion tries a
-//! collision-checked Dubins curve to the goal every `analytic_expansion_every` expansions and
+//! collision-checked Dubins curve to the goal (for a goal whose heading is free, to another
+//! heading where the one planned would loop) every `analytic_expansion_every` expansions and
 //! on every expansion near the goal; within two turning radii of it, with turns in place
 //! allowed, also a turn to face the goal and a straight line to it, taken where it costs less
 //! than the curve (a goal beside or behind the robot, which a Dubins curve loops round). The
@@ -109,6 +110,12 @@ const NO_PARENT: u32 = u32::MAX;
 const NO_PRIM: u16 = u16::MAX;
 /// Heading step between output poses of a turn in place.
 const ROTATION_SAMPLE_RAD: f64 = 0.1;
+/// A curve to a free goal's planned heading is given up for one to another heading when it is
+/// longer by more than this many turning radii: it hooks round the goal (a U-turn beside it
+/// costs about two).
+const LOOP_SLACK: f64 = 1.0;
+/// End headings tried for a free goal's curve when the one to its planned heading loops.
+const FREE_END_HEADINGS: usize = 16;
 
 enum Ending {
     /// The node is within tolerance (position and heading).
@@ -341,7 +348,11 @@ impl Planner {
         }
         let exact_heading = match ending {
             Ending::Node(_) => false,
-            Ending::NodeThenRotate(_) | Ending::Analytic(..) => true,
+            Ending::NodeThenRotate(_) => true,
+            // A free goal's curve may end in another heading than the one planned.
+            Ending::Analytic(_, d) => {
+                normalize_angle(d.sample(d.length_m()).2 - g.yaw_rad).abs() < 1e-6
+            }
             // Within the heading tolerance it arrives along its line.
             Ending::TurnStraight(_, t) => t.final_turn_rad != 0.0,
         };
@@ -452,17 +463,21 @@ impl Planner {
             // Analytic expansion.
             let near_goal = n.h_obstacle < self.config.analytic_near_goal_m;
             if expanded % u64::from(self.config.analytic_expansion_every) == 1 || near_goal {
-                let dubins = DubinsPath::shortest((n.x, n.y, n.yaw), goal_q, rho).filter(|d| {
-                    self.map.curve_free_among(
-                        &self.avoid,
-                        d.length_m(),
-                        self.config.path_spacing_m,
-                        |t| {
-                            let q = d.sample(t);
-                            (q.0, q.1)
-                        },
-                    )
-                });
+                let dubins = self
+                    .analytic_curves(&n, goal_q, rho)
+                    .into_iter()
+                    .flatten()
+                    .find(|d| {
+                        self.map.curve_free_among(
+                            &self.avoid,
+                            d.length_m(),
+                            self.config.path_spacing_m,
+                            |t| {
+                                let q = d.sample(t);
+                                (q.0, q.1)
+                            },
+                        )
+                    });
                 // Near the goal a differential drive can also turn to face it and drive
                 // straight there: where that costs less than the Dubins curve (a goal beside
                 // or behind the robot, closer than a turning circle), the curve would loop
@@ -558,6 +573,50 @@ impl Planner {
             states_expanded: expanded,
             reason: "hybrid A* search space exhausted",
         })
+    }
+
+    /// The Dubins curves the analytic expansion tries from node `n`, in order: the one to the
+    /// goal's heading, unless the goal's heading is free (`goal_yaw_tolerance_rad` at least
+    /// π: a task goal without a heading, planned with its leg's heading) and the shortest
+    /// curve to any of [`FREE_END_HEADINGS`] headings is shorter than it by more than
+    /// [`LOOP_SLACK`] turning radii: then that one comes first, the leg's heading second. A robot
+    /// that came through a door beside the goal, not along the leg from the goal before, was
+    /// otherwise planned round the goal to arrive in the leg's heading, and a camera-driven
+    /// network told to turn round it circled it (task D's last goal, docs/evaluation.md
+    /// round 54). Elsewhere the leg's heading stands, so that the next leg starts ahead.
+    fn analytic_curves(
+        &self,
+        n: &Node,
+        goal_q: (f64, f64, f64),
+        rho: f64,
+    ) -> [Option<DubinsPath>; 2] {
+        let q0 = (n.x, n.y, n.yaw);
+        let to_heading = DubinsPath::shortest(q0, goal_q, rho);
+        if self.config.goal_yaw_tolerance_rad < std::f64::consts::PI {
+            return [to_heading, None];
+        }
+        let slack_m = LOOP_SLACK * rho;
+        let straight_m = (goal_q.0 - n.x).hypot(goal_q.1 - n.y);
+        // The straight distance bounds every curve from below: a curve to the leg's heading
+        // within the slack of it cannot lose by more to any other.
+        if to_heading
+            .as_ref()
+            .is_some_and(|d| d.length_m() <= straight_m + slack_m)
+        {
+            return [to_heading, None];
+        }
+        let bearing_rad = (goal_q.1 - n.y).atan2(goal_q.0 - n.x);
+        #[allow(clippy::cast_precision_loss)]
+        let free = (0..FREE_END_HEADINGS)
+            .map(|k| k as f64 * TAU / FREE_END_HEADINGS as f64)
+            .chain(std::iter::once(bearing_rad))
+            .filter_map(|yaw| DubinsPath::shortest(q0, (goal_q.0, goal_q.1, yaw), rho))
+            .min_by(|a, b| a.length_m().total_cmp(&b.length_m()));
+        match (to_heading, free) {
+            (Some(d), Some(f)) if f.length_m() + slack_m < d.length_m() => [Some(f), Some(d)],
+            (None, f) => [f, None],
+            (d, _) => [d, None],
+        }
     }
 
     /// The [`TurnStraight`] connection from node `n` to `goal` when turns in place and the

@@ -1033,7 +1033,7 @@ fn told(map: &str, about_turn_rad: f64, robot: Pose2D, goal: Goal) -> Dlm {
 /// poses are where r49 reached task E's goals 3 and 2 and task C's goal 2.
 #[test]
 fn a_robot_turning_round_after_a_goal_is_told_the_side_of_the_wall() {
-    // The shipped default (DLM-Net r49's card).
+    // The shipped default (DLM-Net r49's card, and r55's).
     let about = DlmParams::default().about_turn_rad;
     // Task E's goal 3, reached heading west: the next leg starts back east. The wall is to the
     // north, 0.9 m off; south-west, the passage towards the start lies open.
@@ -1075,4 +1075,63 @@ fn a_robot_turning_round_after_a_goal_is_told_the_side_of_the_wall() {
         ..DlmParams::default()
     };
     assert_eq!(bad.validate().unwrap_err().field, "about_turn_rad");
+}
+
+/// The laser's view of task D's cabinet by the room's door (0.5 m by 1 m at (8.6, 8.0)): its
+/// west and south faces, as a robot coming south along x 7.85 sees them.
+fn door_cabinet_points() -> Vec<[f64; 2]> {
+    let mut points = Vec::new();
+    for j in 0..=10 {
+        points.push([8.35, 7.5 + 0.1 * f64::from(j)]);
+    }
+    for i in 1..=5 {
+        points.push([8.35 + 0.1 * f64::from(i), 7.5]);
+    }
+    points
+}
+
+/// A robot coming south beside task D's cabinet by the room's door, on its way east into the
+/// room: the floor plan's route turns east through the cabinet, so the measure tells
+/// `turn_left` while the cabinet is still beside the robot. With `dlm.sidestep_over_turn_rad`
+/// the turn is measured on the path, which goes on south past the cabinet's end first: the
+/// turn comes there (DLM-Net alone turned into this cabinet in 6 of 100 runs, round 54).
+#[test]
+fn a_robot_beside_a_seen_cabinet_is_told_the_turn_past_its_end() {
+    let goals = [Goal::at(12.0, 6.0)];
+    let progress = GoalProgress::new(&goals, 0);
+    let drive = |over_rad: f64| {
+        let mut config = IntentionConfig::default();
+        config.dlm.sidestep_over_turn_rad = over_rad;
+        let mut planner = IntentionPlanner::new(scenario_map("campus", &config), config).unwrap();
+        // From 2 m north of the cabinet's north face to level with its south face (y 7.5).
+        (0..=20)
+            .map(|k| {
+                let y_m = 10.5 - 0.15 * f64::from(k);
+                let mut seeing = estimate(Pose2D::new(7.85, y_m, -1.62), 1 + k as u64);
+                seeing.unmapped_obstacles_m = door_cabinet_points();
+                match planner.answer(&seeing, &progress, false) {
+                    Answer::Heading { plan: Ok(p), .. } => (y_m, p.dlm),
+                    other => panic!("no plan at {y_m}: {other:?}"),
+                }
+            })
+            .collect::<Vec<_>>()
+    };
+    let off = drive(0.0);
+    assert!(
+        off.iter().any(|&(y_m, d)| y_m > 8.5 && d == Dlm::TurnLeft),
+        "as before round 55 the turn comes beside the cabinet: {off:?}"
+    );
+    let on = drive(std::f64::consts::PI);
+    assert!(
+        on.iter().all(|&(y_m, d)| y_m < 7.9 || d == Dlm::GoForward),
+        "{on:?}"
+    );
+    assert_eq!(on.last().map(|&(_, d)| d), Some(Dlm::TurnLeft), "{on:?}");
+    // A turn the measure only holds is left to it: measured on the path every other cycle,
+    // the DLM would flip between the two.
+    assert!(
+        on.windows(3)
+            .all(|w| !(w[0].1 == w[2].1 && w[1].1 != w[0].1)),
+        "{on:?}"
+    );
 }

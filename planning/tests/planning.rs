@@ -403,3 +403,62 @@ fn a_goal_beside_the_robot_is_reached_by_turning_to_it_not_by_a_loop() {
     check_path(&map, &cfg, &path, start, goal);
     assert!(path.poses.windows(2).all(|w| w[0].distance_m(&w[1]) > 1e-6));
 }
+
+/// Task D's campus floor plan (the simulator's scenarios).
+fn campus() -> map_core::OccupancyGrid {
+    let path = test_support::scenarios_dir()
+        .join("maps")
+        .join("campus.yaml");
+    map_core::load_ros_map(&path, &map_core::ImportLimits::default())
+        .unwrap()
+        .grid
+}
+
+#[test]
+fn a_goal_without_a_heading_is_not_looped_round_to_arrive_in_its_legs_heading() {
+    // Task D's last goal (12, 6), planned with its leg's heading from the goal before, (33, 4):
+    // west. The robot comes in through the room's west door, heading east 1.3 m from it; the
+    // Dubins curve to the west heading runs past the goal and round it (round 54: a
+    // camera-driven network told to turn round it circled the goal until a person stepped in).
+    let goal = Pose2D::new(12.0, 6.0, (6.0_f64 - 4.0).atan2(12.0 - 33.0));
+    for start in [
+        Pose2D::new(11.41, 7.06, -0.19),
+        Pose2D::new(10.32, 7.19, 0.24),
+    ] {
+        let straight_m = start.distance_m(&goal);
+        let free = PlannerConfig {
+            goal_yaw_tolerance_rad: std::f64::consts::PI,
+            ..PlannerConfig::default()
+        };
+        let map = Arc::new(PlanningMap::new(campus(), &free).unwrap());
+        let path = Planner::new(Arc::clone(&map), free.clone())
+            .unwrap()
+            .plan(start, goal)
+            .unwrap();
+        check_path(&map, &free, &path, start, goal);
+        assert!(
+            path.length_m < straight_m + 0.6,
+            "free heading: {} m for {straight_m} m: {:?}",
+            path.length_m,
+            path.poses
+        );
+        assert!(
+            path.poses.iter().all(|p| p.x_m < 12.3),
+            "nothing past the goal: {:?}",
+            path.poses
+        );
+        // A goal with a heading is still reached in it, round the loop if need be.
+        let fixed = PlannerConfig::default();
+        let map = Arc::new(PlanningMap::new(campus(), &fixed).unwrap());
+        let path = Planner::new(Arc::clone(&map), fixed.clone())
+            .unwrap()
+            .plan(start, goal)
+            .unwrap();
+        check_path(&map, &fixed, &path, start, goal);
+        assert!(
+            path.length_m > straight_m + 0.9,
+            "fixed heading: {} m for {straight_m} m",
+            path.length_m
+        );
+    }
+}

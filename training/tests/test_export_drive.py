@@ -50,12 +50,13 @@ def main() -> int:
     assert json.loads(from_robot["dlm_params"])["heading_start_m"] == 0.0
     refused(card, {"heading_start_m": "0.5"}, "heading_start_m = '0.5'")
     refused({"kind": "lpe"}, {"heading_start_m": 0.5}, "only a DLM-Net")
-    # A parameter the planner gained after the card was written (round 49's turn before a wall).
-    assert "blocked_ahead_m" not in trained, trained
-    blocked = dict(card)
-    drive_dlm_with(blocked, {"blocked_ahead_m": 1.2})
-    assert json.loads(blocked["dlm_params"])["blocked_ahead_m"] == 1.2
-    refused(card, {"blocked_ahead": 1.2}, "'blocked_ahead'")
+    # A parameter the planner gained after the card was written (round 55's turn beside a seen
+    # obstacle measured on the path).
+    assert "sidestep_over_turn_rad" not in trained, trained
+    over = dict(card)
+    drive_dlm_with(over, {"sidestep_over_turn_rad": 3.0})
+    assert json.loads(over["dlm_params"])["sidestep_over_turn_rad"] == 3.0
+    refused(card, {"sidestep_over_turn": 3.0}, "'sidestep_over_turn'")
     print("export --drive-dlm-params: ok")
     return 0
 

@@ -125,23 +125,25 @@ pub struct DlmParams {
     /// `Stop` too, but *arriving* ([`protocol::Intention::arriving`]: the robot drives on to
     /// the goal), when the path left is at most this long and longer than `stop_distance_m`,
     /// and the measure says `GoForward` (a turn still ahead stays a turn). 0: never, what
-    /// DLM-Net r5 was trained on; 1.5 (the default): what the shipped DLM-Net r49 drives on
-    /// (its card's `dlm_params`). The one-hot `go_forward` cannot tell a camera-driven network
-    /// that its goal is near, so it either rolls past goals or stops short of those in front
-    /// of a wall (docs/evaluation.md, round 45).
+    /// DLM-Net r5 was trained on; 1.5: what DLM-Net r49 was trained and shipped on; 2.0 (the
+    /// default): what the shipped DLM-Net r55 drives on (its card's `dlm_params`): where a goal
+    /// without a heading is reached straight, not round a hook, the turn towards it told from
+    /// 1.5 m comes too late for a network at full speed (round 54). The one-hot `go_forward`
+    /// cannot tell a camera-driven network that its goal is near, so it either rolls past
+    /// goals or stops short of those in front of a wall (docs/evaluation.md, round 45).
     pub arrive_distance_m: f64,
     /// Within `arrive_distance_m`: the arriving `Stop` only while the goal lies within this
     /// angle of the robot's heading; farther off, `TurnLeft`/`TurnRight` towards it (held down
     /// to half the angle). A `stop` one-hot does not say which way the goal lies, and a
     /// network told it drives the last metres straight (round 46). π: any bearing, as round
-    /// 46's first fine-tune (a) was trained on; 0.2 (the default): DLM-Net r49's.
+    /// 46's first fine-tune (a) was trained on; 0.2 (the default): DLM-Net r49's and r55's.
     pub arrive_bearing_rad: f64,
     /// Both turn angles (`turn_threshold_rad`, `turn_release_rad`) fall to `blocked_turn_rad`
     /// while the floor plan lets the robot drive less than this straight ahead
     /// ([`PlanningMap::free_ahead_m`]). A robot that faces a wall or a door's jamb cannot go
     /// forward, so a turn it still needs is told until it is nearly done; elsewhere the wide
     /// release stands, which a camera-driven network needs in a maze. 0: never, as before round
-    /// 49; 1.2 (the default): DLM-Net r49's. Round 48 found DLM-Net leaving a room across a
+    /// 49; 1.2 (the default): DLM-Net r49's and r55's. Round 48 found DLM-Net leaving a room across a
     /// corridor, told `go_forward` with 0.4 rad still to turn, standing before the jamb opposite.
     pub blocked_ahead_m: f64,
     /// The turn angle while blocked (see `blocked_ahead_m`).
@@ -154,11 +156,21 @@ pub struct DlmParams {
     /// that. The measures turn on the floor plan's route, which runs straight into the cabinet:
     /// told `go_forward`, DLM-Net r49 kept to the corridor's middle and clipped task C's
     /// cabinet in 9 runs of 10 (round 51).
-    /// 0: never, as before round 51; 2.0 (the default): what the shipped DLM-Net r49 drives on
-    /// since round 51 (its card's `dlm_params`).
+    /// 0: never, as before round 51; 2.0 (the default): what DLM-Net r49 drove on since round
+    /// 51, and the shipped r55 drives on (its card's `dlm_params`).
     pub sidestep_ahead_m: f64,
     /// The bearing that starts the turn (see `sidestep_ahead_m`).
     pub sidestep_turn_rad: f64,
+    /// Where the measure tells a turn afresh (not only holds one), the floor plan's route leaves
+    /// less than this off the heading (its first piece), and the path goes round a seen obstacle
+    /// the route runs into (as for `sidestep_ahead_m`), the turn is measured on the path instead
+    /// of the route. Beside such an obstacle the route turns into it: DLM-Net, told `turn_left`
+    /// beside task D's cabinet by the room's door (8.6, 8.0) while the path still ran past it,
+    /// turned into it (6 of 100 runs alone, round 54; none with the rule, round 55). A turn the
+    /// measure only holds stays: it is the sidestep's own from the cycle before, and measured
+    /// on the path it would flip to `GoForward` every other cycle. 0: never, as before round
+    /// 55; π (the default): any turn, what the shipped DLM-Net r55 drives on.
+    pub sidestep_over_turn_rad: f64,
     /// A turn round: where the route's first piece lies at least this far off the heading
     /// (`first_turn` only; the next leg starts behind the robot, as after a goal), the turn is
     /// told towards the side the floor plan closes in (a fan of rays up to [`ABOUT_TURN_RAY_M`]
@@ -168,8 +180,8 @@ pub struct DlmParams {
     /// junction ahead; told it towards a wall, it turns on the spot, as it learned from wall
     /// starts. Round 53: of DLM-Net r49's 28 interventions alone (tasks A–E × 20), 16 were
     /// turns round after a goal, at three goals each with a passage open on the side it was
-    /// told. 0: never, as before round 53; 2.6 (150°, the default): what the shipped DLM-Net
-    /// r49 drives on since round 53 (its card's `dlm_params`). At 2.2 a route leaving 125° to
+    /// told. 0: never, as before round 53; 2.6 (150°, the default): what DLM-Net r49 drove on
+    /// since round 53, and the shipped r55 drives on (its card's `dlm_params`). At 2.2 a route leaving 125° to
     /// one side was turned the long way round, towards the wall on the other (task E's goal 3:
     /// 0.35 interventions per run alone became 0.70).
     pub about_turn_rad: f64,
@@ -190,16 +202,18 @@ impl Default for DlmParams {
             turn_threshold_rad: 0.8,
             turn_release_rad: 0.6,
             stop_distance_m: 0.3,
-            // DLM-Net r49's card (docs/evaluation.md, rounds 46-50): the planner must derive
-            // the DLM the shipped network drives on.
-            arrive_distance_m: 1.5,
+            // The shipped DLM-Net r55's card (docs/evaluation.md, rounds 46-50, 54-55): the
+            // planner must derive the DLM the shipped network drives on.
+            arrive_distance_m: 2.0,
             arrive_bearing_rad: 0.2,
             blocked_ahead_m: 1.2,
             blocked_turn_rad: 0.2,
-            // DLM-Net r49's card since round 51.
+            // DLM-Net r49's card since round 51, and r55's.
             sidestep_ahead_m: 2.0,
             sidestep_turn_rad: 0.3,
-            // DLM-Net r49's card since round 53.
+            // DLM-Net r55's card.
+            sidestep_over_turn_rad: std::f64::consts::PI,
+            // DLM-Net r49's card since round 53, and r55's.
             about_turn_rad: ABOUT_TURN_RAD,
         }
     }
@@ -227,7 +241,7 @@ impl DlmParams {
 
     /// The defaults with every key added since the first model cards at the value that leaves
     /// its rule off (`arrive_distance_m` 0, `arrive_bearing_rad` π, `blocked_ahead_m` 0,
-    /// `sidestep_ahead_m` 0): what a
+    /// `sidestep_ahead_m` 0, `sidestep_over_turn_rad` 0, `about_turn_rad` 0): what a
     /// card or recording written before the key existed meant, and what DLM-Net r1-r5 were
     /// trained and driven on.
     #[must_use]
@@ -237,6 +251,7 @@ impl DlmParams {
             arrive_bearing_rad: std::f64::consts::PI,
             blocked_ahead_m: 0.0,
             sidestep_ahead_m: 0.0,
+            sidestep_over_turn_rad: 0.0,
             about_turn_rad: 0.0,
             ..Self::default()
         }
@@ -271,6 +286,7 @@ impl DlmParams {
             ("blocked_turn_rad", self.blocked_turn_rad),
             ("sidestep_ahead_m", self.sidestep_ahead_m),
             ("sidestep_turn_rad", self.sidestep_turn_rad),
+            ("sidestep_over_turn_rad", self.sidestep_over_turn_rad),
             ("about_turn_rad", self.about_turn_rad),
         ] {
             if !value.is_finite() || value < 0.0 {
@@ -315,12 +331,17 @@ impl DlmParams {
                 reason: "must be at most pi",
             });
         }
-        if self.about_turn_rad > std::f64::consts::PI {
-            return Err(DlmParamsError {
-                field: "about_turn_rad",
-                value: self.about_turn_rad,
-                reason: "must be at most pi",
-            });
+        for (field, value) in [
+            ("about_turn_rad", self.about_turn_rad),
+            ("sidestep_over_turn_rad", self.sidestep_over_turn_rad),
+        ] {
+            if value > std::f64::consts::PI {
+                return Err(DlmParamsError {
+                    field,
+                    value,
+                    reason: "must be at most pi",
+                });
+            }
         }
         if self.turn_threshold_rad > std::f64::consts::PI {
             return Err(DlmParamsError {
@@ -421,16 +442,35 @@ pub fn dlm_on_map(
             params.blocked_ahead_m,
         ) < params.blocked_ahead_m;
     let dlm = decide(path, route.as_deref(), robot, params, previous, blocked);
-    if matches!(dlm, Dlm::TurnLeft | Dlm::TurnRight) {
-        return about_turn_side(map, path, route.as_deref(), robot, params).unwrap_or(dlm);
-    }
-    if dlm != Dlm::GoForward || params.sidestep_ahead_m <= 0.0 {
+    let turn = matches!(dlm, Dlm::TurnLeft | Dlm::TurnRight);
+    let dlm = if turn {
+        about_turn_side(map, path, route.as_deref(), robot, params).unwrap_or(dlm)
+    } else {
+        dlm
+    };
+    if params.sidestep_ahead_m <= 0.0 {
         return dlm;
     }
     let Some(closest) = crate::path::nearest_index(path, robot) else {
         return dlm;
     };
     let rest = &path[closest..];
+    let sidestep_may = match dlm {
+        Dlm::GoForward => true,
+        // A turn the measure only holds (from `previous`) is the sidestep's own, told the
+        // cycle before: measured on the path, it would be `GoForward` every other cycle.
+        Dlm::TurnLeft | Dlm::TurnRight => {
+            params.sidestep_over_turn_rad > 0.0
+                && piece_angles_rad(route.as_deref().unwrap_or(rest), robot, params)
+                    .first()
+                    .is_some_and(|first_rad| first_rad.abs() < params.sidestep_over_turn_rad)
+                && decide(path, route.as_deref(), robot, params, None, blocked) == dlm
+        }
+        Dlm::Stop => false,
+    };
+    if !sidestep_may {
+        return dlm;
+    }
     let reach_m = params.sidestep_ahead_m + SIDESTEP_BEYOND_M;
     let berth_m = map.robot_radius_m() + SIDESTEP_BERTH_M;
     // The turn is the obstacle's where the floor plan's route runs into it and the path goes
@@ -443,7 +483,13 @@ pub fn dlm_on_map(
     if !blocking {
         return dlm;
     }
-    sidestep_move(rest, robot, params, previous)
+    if dlm == Dlm::GoForward {
+        sidestep_move(rest, robot, params, previous)
+    } else {
+        // The route turns towards what it runs into; the path's own first metre says where
+        // the way round turns.
+        decide(path, None, robot, params, previous, blocked)
+    }
 }
 
 /// [`DlmParams::about_turn_rad`]'s default (rad).
@@ -787,16 +833,17 @@ mod tests {
         DlmParams::default().validate().unwrap();
         assert_eq!(DlmParams::default().measure, DlmMeasure::FirstTurn);
         // The heading measure's own defaults but for the measure and the first metre, and the
-        // shipped DLM-Net r49's arriving Stop and turn before a wall.
+        // shipped DLM-Net r55's arriving Stop, turn before a wall, sidestep and turn round.
         assert_eq!(
             DlmParams::default(),
             DlmParams {
                 measure: DlmMeasure::FirstTurn,
                 heading_start_m: 0.0,
-                arrive_distance_m: 1.5,
+                arrive_distance_m: 2.0,
                 arrive_bearing_rad: 0.2,
                 blocked_ahead_m: 1.2,
                 sidestep_ahead_m: 2.0,
+                sidestep_over_turn_rad: PI,
                 about_turn_rad: 2.6,
                 ..DlmParams::heading()
             }
@@ -808,9 +855,18 @@ mod tests {
                 arrive_bearing_rad: PI,
                 blocked_ahead_m: 0.0,
                 sidestep_ahead_m: 0.0,
+                sidestep_over_turn_rad: 0.0,
                 about_turn_rad: 0.0,
                 ..DlmParams::default()
             }
+        );
+        let bad = DlmParams {
+            sidestep_over_turn_rad: 3.2,
+            ..DlmParams::default()
+        };
+        assert_eq!(
+            bad.validate().unwrap_err().to_string(),
+            "invalid dlm.sidestep_over_turn_rad = 3.2: must be at most pi"
         );
         let bad = DlmParams {
             window_m: 0.0,
@@ -1178,11 +1234,11 @@ mod tests {
             near,
             &DlmParams::as_before()
         ));
-        // The defaults are the shipped DLM-Net r49's: arriving within 1.5 m, goal within 0.2 rad.
+        // The defaults are the shipped DLM-Net r55's: arriving within 2 m, goal within 0.2 rad.
         let shipped = DlmParams::default();
         assert_eq!(
             (shipped.arrive_distance_m, shipped.arrive_bearing_rad),
-            (1.5, 0.2)
+            (2.0, 0.2)
         );
         assert_eq!(
             next_dlm_along(&straight, Some(&straight), near, &shipped, None),
