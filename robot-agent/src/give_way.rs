@@ -46,7 +46,11 @@ pub struct GiveWayConfig {
     pub narrow_width_m: f64,
     /// The robot waits this far before the passage ...
     pub hold_back_m: f64,
-    /// ... and this far to the side of the path, room allowing (0: on the path).
+    /// ... and this far to the side of the path, room allowing (0: on the path, where the
+    /// person coming out stepped round the robot towards the wall and stood there, round 14).
+    /// 0.4 (the default since round 55): at 0.8, a DLM-Net that waited south-east of task C's
+    /// cabinet, in its shadow, then nosed into its corner on the way back to the gap (9 of 20
+    /// runs deployed; 1 at 0.4, LPE-Net 2 against 1, docs/evaluation.md round 55).
     pub step_aside_m: f64,
     /// The robot's radius, and the room it keeps to walls when it steps aside.
     pub robot_radius_m: f64,
@@ -71,7 +75,7 @@ impl Default for GiveWayConfig {
             oncoming_mps: 0.15,
             narrow_width_m: 1.3,
             hold_back_m: 1.0,
-            step_aside_m: 0.8,
+            step_aside_m: 0.4,
             robot_radius_m: 0.25,
             wall_margin_m: 0.15,
             committed_m: 0.3,
