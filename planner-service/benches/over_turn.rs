@@ -14,7 +14,7 @@
 mod common;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use planning::{Disc, Goal, IntentionConfig};
+use planning::{Goal, IntentionConfig};
 use protocol::Pose2D;
 
 /// The cabinet's west and south faces, as the agent's obstacle layer reports them: points
@@ -42,7 +42,6 @@ fn config(sidestep_over_turn_rad: f64) -> IntentionConfig {
 }
 
 fn over_turn(c: &mut Criterion) {
-    let base = IntentionConfig::default();
     let map = common::scenario_map("campus");
     let goals = [Goal::at(12.0, 6.0)];
     let goal = Pose2D::new(12.0, 6.0, 0.0);
@@ -51,14 +50,7 @@ fn over_turn(c: &mut Criterion) {
         common::answered(&map, "campus", config, &goals, walk(), &cabinet)
     };
     let answered = drive(config(std::f64::consts::PI));
-    let seen: Vec<Disc> = cabinet
-        .iter()
-        .map(|&[x_m, y_m]| Disc {
-            x_m,
-            y_m,
-            radius_m: base.seen.radius_m,
-        })
-        .collect();
+    let seen = common::seen_discs(&cabinet);
     common::rule_off_on(
         c,
         "over_turn_campus_door_cabinet",

@@ -12,7 +12,7 @@
 mod common;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use planning::{Disc, Goal, IntentionConfig};
+use planning::{Goal, IntentionConfig};
 use protocol::Pose2D;
 
 /// The face and sides of a cabinet standing out from the corridor's north wall to its centre
@@ -44,7 +44,6 @@ fn config(sidestep_ahead_m: f64) -> IntentionConfig {
 }
 
 fn sidestep(c: &mut Criterion) {
-    let base = IntentionConfig::default();
     let map = common::scenario_map("corridor");
     let goals = [Goal::at(25.5, 5.2)];
     let goal = Pose2D::new(25.5, 5.2, 0.0);
@@ -53,14 +52,7 @@ fn sidestep(c: &mut Criterion) {
         common::answered(&map, "corridor", config, &goals, approach(), &cabinet)
     };
     let answered = drive(config(2.0));
-    let seen: Vec<Disc> = cabinet_points()
-        .iter()
-        .map(|&[x_m, y_m]| Disc {
-            x_m,
-            y_m,
-            radius_m: base.seen.radius_m,
-        })
-        .collect();
+    let seen = common::seen_discs(&cabinet);
 
     common::rule_off_on(
         c,

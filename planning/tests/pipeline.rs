@@ -933,24 +933,20 @@ fn the_last_straight_metres_before_a_goal_are_an_arriving_stop() {
 /// `go_forward` all the way in (DLM-Net r49 on task C, round 51).
 #[test]
 fn a_robot_heading_for_a_seen_cabinet_is_told_to_turn_away_from_it() {
-    let goals = [Goal::at(25.5, 5.2)];
-    let progress = GoalProgress::new(&goals, 0);
+    // From 4.6 m short of the cabinet's face to 0.6 m short, heading east on y 5.2.
+    let xs_m: Vec<f64> = (0..=20).map(|k| 7.0 + 0.2 * f64::from(k)).collect();
     let drive = |sidestep_ahead_m: f64| {
         let mut config = IntentionConfig::default();
         config.dlm.sidestep_ahead_m = sidestep_ahead_m;
-        let mut planner = IntentionPlanner::new(scenario_map("corridor", &config), config).unwrap();
-        // From 4.6 m short of the cabinet's face to 0.6 m short, heading east on y 5.2.
-        (0..=20)
-            .map(|k| {
-                let x_m = 7.0 + 0.2 * f64::from(k);
-                let mut seeing = estimate(Pose2D::new(x_m, 5.2, 0.0), 1 + u64::from(k as u8));
-                seeing.unmapped_obstacles_m = cabinet_points();
-                match planner.answer(&seeing, &progress, false) {
-                    Answer::Heading { plan: Ok(p), .. } => (x_m, p.dlm),
-                    other => panic!("no plan at {x_m}: {other:?}"),
-                }
-            })
-            .collect::<Vec<_>>()
+        let poses = xs_m.iter().map(|&x_m| Pose2D::new(x_m, 5.2, 0.0));
+        let told = told_along(
+            "corridor",
+            config,
+            Goal::at(25.5, 5.2),
+            poses,
+            &cabinet_points(),
+        );
+        xs_m.iter().copied().zip(told).collect::<Vec<_>>()
     };
     let off = drive(0.0);
     assert!(off.iter().all(|&(_, d)| d == Dlm::GoForward), "{off:?}");
@@ -1011,6 +1007,31 @@ fn a_seen_box_in_a_corner_the_route_turns_round_changes_no_dlm() {
         assert_eq!(dlm(&off), Dlm::GoForward, "after {previous:?}");
         assert_eq!(dlm(&config.dlm), Dlm::GoForward, "after {previous:?}");
     }
+}
+
+/// The DLMs one pipeline with `config` tells a robot at each of `poses` in turn on its way to
+/// `goal` on scenario map `map`, its laser seeing `seen_m` (map frame, m) the floor plan lacks.
+fn told_along(
+    map: &str,
+    config: IntentionConfig,
+    goal: Goal,
+    poses: impl Iterator<Item = Pose2D>,
+    seen_m: &[[f64; 2]],
+) -> Vec<Dlm> {
+    let mut planner = IntentionPlanner::new(scenario_map(map, &config), config).unwrap();
+    let goals = [goal];
+    let progress = GoalProgress::new(&goals, 0);
+    poses
+        .zip(1..)
+        .map(|(robot, seq)| {
+            let mut seeing = estimate(robot, seq);
+            seeing.unmapped_obstacles_m = seen_m.to_vec();
+            match planner.answer(&seeing, &progress, false) {
+                Answer::Heading { plan: Ok(p), .. } => p.dlm,
+                other => panic!("no plan at {robot:?}: {other:?}"),
+            }
+        })
+        .collect()
 }
 
 /// The DLM the pipeline tells a robot at `robot` on the way to `goal` on scenario map `map`,
@@ -1097,24 +1118,20 @@ fn door_cabinet_points() -> Vec<[f64; 2]> {
 /// turn comes there (DLM-Net alone turned into this cabinet in 6 of 100 runs, round 54).
 #[test]
 fn a_robot_beside_a_seen_cabinet_is_told_the_turn_past_its_end() {
-    let goals = [Goal::at(12.0, 6.0)];
-    let progress = GoalProgress::new(&goals, 0);
+    // From 2 m north of the cabinet's north face to level with its south face (y 7.5).
+    let ys_m: Vec<f64> = (0..=20).map(|k| 10.5 - 0.15 * f64::from(k)).collect();
     let drive = |over_rad: f64| {
         let mut config = IntentionConfig::default();
         config.dlm.sidestep_over_turn_rad = over_rad;
-        let mut planner = IntentionPlanner::new(scenario_map("campus", &config), config).unwrap();
-        // From 2 m north of the cabinet's north face to level with its south face (y 7.5).
-        (0..=20)
-            .map(|k| {
-                let y_m = 10.5 - 0.15 * f64::from(k);
-                let mut seeing = estimate(Pose2D::new(7.85, y_m, -1.62), 1 + k as u64);
-                seeing.unmapped_obstacles_m = door_cabinet_points();
-                match planner.answer(&seeing, &progress, false) {
-                    Answer::Heading { plan: Ok(p), .. } => (y_m, p.dlm),
-                    other => panic!("no plan at {y_m}: {other:?}"),
-                }
-            })
-            .collect::<Vec<_>>()
+        let poses = ys_m.iter().map(|&y_m| Pose2D::new(7.85, y_m, -1.62));
+        let told = told_along(
+            "campus",
+            config,
+            Goal::at(12.0, 6.0),
+            poses,
+            &door_cabinet_points(),
+        );
+        ys_m.iter().copied().zip(told).collect::<Vec<_>>()
     };
     let off = drive(0.0);
     assert!(

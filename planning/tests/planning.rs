@@ -333,11 +333,12 @@ fn many_threads_share_one_map() {
     assert!(map.cache_stats().hits > 0);
 }
 
-/// Task B's office floor plan (the simulator's scenarios).
-fn office() -> map_core::OccupancyGrid {
+/// A floor plan of the simulator's scenarios (`sim/scenarios/maps/<name>.yaml`): task B's
+/// office, task D's campus.
+fn scenario_grid(name: &str) -> map_core::OccupancyGrid {
     let path = test_support::scenarios_dir()
         .join("maps")
-        .join("office.yaml");
+        .join(format!("{name}.yaml"));
     map_core::load_ros_map(&path, &map_core::ImportLimits::default())
         .unwrap()
         .grid
@@ -354,7 +355,7 @@ fn a_goal_beside_the_robot_is_reached_by_turning_to_it_not_by_a_loop() {
             goal_yaw_tolerance_rad: tolerance_rad,
             ..PlannerConfig::default()
         };
-        let map = Arc::new(PlanningMap::new(office(), &cfg).unwrap());
+        let map = Arc::new(PlanningMap::new(scenario_grid("office"), &cfg).unwrap());
         let goal = Pose2D::new(30.0, 16.0, 0.74);
         let path = Planner::new(Arc::clone(&map), cfg.clone())
             .unwrap()
@@ -386,7 +387,7 @@ fn a_goal_beside_the_robot_is_reached_by_turning_to_it_not_by_a_loop() {
         analytic_turn_straight: false,
         ..PlannerConfig::default()
     };
-    let map = Arc::new(PlanningMap::new(office(), &cfg).unwrap());
+    let map = Arc::new(PlanningMap::new(scenario_grid("office"), &cfg).unwrap());
     let path = Planner::new(Arc::clone(&map), cfg.clone())
         .unwrap()
         .plan(start, Pose2D::new(30.0, 16.0, 0.74))
@@ -394,7 +395,7 @@ fn a_goal_beside_the_robot_is_reached_by_turning_to_it_not_by_a_loop() {
     assert!(path.length_m > 2.0, "{} m", path.length_m);
     // Ahead of the robot, 4 m on: the smooth curve, no turn in place.
     let cfg = PlannerConfig::default();
-    let map = Arc::new(PlanningMap::new(office(), &cfg).unwrap());
+    let map = Arc::new(PlanningMap::new(scenario_grid("office"), &cfg).unwrap());
     let (start, goal) = (Pose2D::new(29.0, 12.5, 0.3), Pose2D::new(32.5, 13.5, 0.2));
     let path = Planner::new(Arc::clone(&map), cfg.clone())
         .unwrap()
@@ -402,16 +403,6 @@ fn a_goal_beside_the_robot_is_reached_by_turning_to_it_not_by_a_loop() {
         .unwrap();
     check_path(&map, &cfg, &path, start, goal);
     assert!(path.poses.windows(2).all(|w| w[0].distance_m(&w[1]) > 1e-6));
-}
-
-/// Task D's campus floor plan (the simulator's scenarios).
-fn campus() -> map_core::OccupancyGrid {
-    let path = test_support::scenarios_dir()
-        .join("maps")
-        .join("campus.yaml");
-    map_core::load_ros_map(&path, &map_core::ImportLimits::default())
-        .unwrap()
-        .grid
 }
 
 #[test]
@@ -430,7 +421,7 @@ fn a_goal_without_a_heading_is_not_looped_round_to_arrive_in_its_legs_heading() 
             goal_yaw_tolerance_rad: std::f64::consts::PI,
             ..PlannerConfig::default()
         };
-        let map = Arc::new(PlanningMap::new(campus(), &free).unwrap());
+        let map = Arc::new(PlanningMap::new(scenario_grid("campus"), &free).unwrap());
         let path = Planner::new(Arc::clone(&map), free.clone())
             .unwrap()
             .plan(start, goal)
@@ -449,7 +440,7 @@ fn a_goal_without_a_heading_is_not_looped_round_to_arrive_in_its_legs_heading() 
         );
         // A goal with a heading is still reached in it, round the loop if need be.
         let fixed = PlannerConfig::default();
-        let map = Arc::new(PlanningMap::new(campus(), &fixed).unwrap());
+        let map = Arc::new(PlanningMap::new(scenario_grid("campus"), &fixed).unwrap());
         let path = Planner::new(Arc::clone(&map), fixed.clone())
             .unwrap()
             .plan(start, goal)

@@ -16,6 +16,18 @@ pub fn scenario_map(name: &str) -> Arc<PlanningMap> {
     Arc::new(PlanningMap::new(ros.grid, &IntentionConfig::default().planner).expect("map prepares"))
 }
 
+/// The discs the intention pipeline keeps out of round `points` (map frame, m) the laser sees,
+/// at the default `[seen_obstacles] radius_m`.
+// Each bench compiles this module on its own; the turn round's sees nothing.
+#[allow(dead_code)]
+pub fn seen_discs(points: &[[f64; 2]]) -> Vec<Disc> {
+    let radius_m = IntentionConfig::default().seen.radius_m;
+    points
+        .iter()
+        .map(|&[x_m, y_m]| Disc { x_m, y_m, radius_m })
+        .collect()
+}
+
 /// The path a fresh intention pipeline with `config` answers to a robot at each of `poses`
 /// (sequence number, pose) on its way to `goals` on scenario map `map_name`, its laser seeing
 /// `obstacles` (map frame, m) the floor plan lacks.

@@ -411,8 +411,9 @@ pub fn next_dlm(path: &[Pose2D], robot: Pose2D, params: &DlmParams, previous: Op
 /// `previous`: the route measure turns on the floor plan's route from the robot
 /// ([`floor_plan_route`], as far as the chord reaches), the others on the path; where the path
 /// goes round one of the `seen` obstacles just ahead, the path's sidestep
-/// ([`DlmParams::sidestep_ahead_m`]). What the pipeline answers and `planner-service plan`
-/// prints.
+/// ([`DlmParams::sidestep_ahead_m`]), or a fresh turn measured on the path
+/// ([`DlmParams::sidestep_over_turn_rad`]). What the pipeline answers and `planner-service
+/// plan` prints.
 #[must_use]
 pub fn dlm_on_map(
     map: &PlanningMap,
@@ -441,12 +442,11 @@ pub fn dlm_on_map(
             BAND_OF_RADIUS * map.robot_radius_m(),
             params.blocked_ahead_m,
         ) < params.blocked_ahead_m;
-    let dlm = decide(path, route.as_deref(), robot, params, previous, blocked);
-    let turn = matches!(dlm, Dlm::TurnLeft | Dlm::TurnRight);
-    let dlm = if turn {
-        about_turn_side(map, path, route.as_deref(), robot, params).unwrap_or(dlm)
-    } else {
-        dlm
+    let dlm = match decide(path, route.as_deref(), robot, params, previous, blocked) {
+        turn @ (Dlm::TurnLeft | Dlm::TurnRight) => {
+            about_turn_side(map, path, route.as_deref(), robot, params).unwrap_or(turn)
+        }
+        dlm => dlm,
     };
     if params.sidestep_ahead_m <= 0.0 {
         return dlm;
@@ -455,31 +455,30 @@ pub fn dlm_on_map(
         return dlm;
     };
     let rest = &path[closest..];
-    let sidestep_may = match dlm {
-        Dlm::GoForward => true,
-        // A turn the measure only holds (from `previous`) is the sidestep's own, told the
-        // cycle before: measured on the path, it would be `GoForward` every other cycle.
-        Dlm::TurnLeft | Dlm::TurnRight => {
-            params.sidestep_over_turn_rad > 0.0
-                && piece_angles_rad(route.as_deref().unwrap_or(rest), robot, params)
-                    .first()
-                    .is_some_and(|first_rad| first_rad.abs() < params.sidestep_over_turn_rad)
-                && decide(path, route.as_deref(), robot, params, None, blocked) == dlm
-        }
-        Dlm::Stop => false,
-    };
-    if !sidestep_may {
+    let turn = matches!(dlm, Dlm::TurnLeft | Dlm::TurnRight);
+    if !(dlm == Dlm::GoForward || (turn && params.sidestep_over_turn_rad > 0.0)) {
         return dlm;
     }
     let reach_m = params.sidestep_ahead_m + SIDESTEP_BEYOND_M;
     let berth_m = map.robot_radius_m() + SIDESTEP_BERTH_M;
+    if !passes_near(rest, seen, reach_m, berth_m) {
+        return dlm;
+    }
+    // A turn the measure only holds (from `previous`) is the sidestep's own, told the cycle
+    // before: measured on the path, it would be `GoForward` every other cycle.
+    if turn
+        && !(first_piece_rad(route.as_deref(), rest, robot, params)
+            .is_some_and(|first_rad| first_rad.abs() < params.sidestep_over_turn_rad)
+            && decide(path, route.as_deref(), robot, params, None, blocked) == dlm)
+    {
+        return dlm;
+    }
     // The turn is the obstacle's where the floor plan's route runs into it and the path goes
     // round it. Where the route passes it anyway (a box in a maze's corner, which the route
     // cuts past on the other side), the path's bend is the route's own turn, and told early it
     // cuts the corner of the wall the robot has to pass first (task E, round 51).
-    let blocking = passes_near(rest, seen, reach_m, berth_m)
-        && floor_plan_route(map, robot, goal, reach_m)
-            .is_some_and(|route| passes_near(&route, seen, reach_m, berth_m));
+    let blocking = floor_plan_route(map, robot, goal, reach_m)
+        .is_some_and(|route| passes_near(&route, seen, reach_m, berth_m));
     if !blocking {
         return dlm;
     }
@@ -518,7 +517,7 @@ fn about_turn_side(
         return None;
     }
     let rest = &path[crate::path::nearest_index(path, robot)?..];
-    let first_rad = *piece_angles_rad(route.unwrap_or(rest), robot, params).first()?;
+    let first_rad = first_piece_rad(route, rest, robot, params)?;
     if first_rad.abs() < params.about_turn_rad {
         return None;
     }
@@ -544,6 +543,19 @@ fn about_turn_side(
     } else {
         None
     }
+}
+
+/// The angle (rad, left positive) between the robot's heading and the first piece of the
+/// floor plan's `route`, or of `rest` (the path from the robot on) where there is none.
+fn first_piece_rad(
+    route: Option<&[Pose2D]>,
+    rest: &[Pose2D],
+    robot: Pose2D,
+    params: &DlmParams,
+) -> Option<f64> {
+    piece_angles_rad(route.unwrap_or(rest), robot, params)
+        .first()
+        .copied()
 }
 
 /// The rays of [`about_turn_side`]'s fan, about the middle of a side's sweep (rad).
