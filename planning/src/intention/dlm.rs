@@ -136,15 +136,17 @@ pub struct DlmParams {
     /// angle of the robot's heading; farther off, `TurnLeft`/`TurnRight` towards it (held down
     /// to half the angle). A `stop` one-hot does not say which way the goal lies, and a
     /// network told it drives the last metres straight (round 46). π: any bearing, as round
-    /// 46's first fine-tune (a) was trained on; 0.2 (the default): DLM-Net r49's, r55's and r56's.
+    /// 46's first fine-tune (a) was trained on; 0.2 (the default): DLM-Net r49's, r55's and
+    /// r56's.
     pub arrive_bearing_rad: f64,
     /// Both turn angles (`turn_threshold_rad`, `turn_release_rad`) fall to `blocked_turn_rad`
     /// while the floor plan lets the robot drive less than this straight ahead
     /// ([`PlanningMap::free_ahead_m`]). A robot that faces a wall or a door's jamb cannot go
     /// forward, so a turn it still needs is told until it is nearly done; elsewhere the wide
     /// release stands, which a camera-driven network needs in a maze. 0: never, as before round
-    /// 49; 1.2 (the default): DLM-Net r49's, r55's and r56's. Round 48 found DLM-Net leaving a room across a
-    /// corridor, told `go_forward` with 0.4 rad still to turn, standing before the jamb opposite.
+    /// 49; 1.2 (the default): DLM-Net r49's, r55's and r56's. Round 48 found DLM-Net leaving a
+    /// room across a corridor, told `go_forward` with 0.4 rad still to turn, standing before the
+    /// jamb opposite.
     pub blocked_ahead_m: f64,
     /// The turn angle while blocked (see `blocked_ahead_m`).
     pub blocked_turn_rad: f64,
@@ -181,9 +183,9 @@ pub struct DlmParams {
     /// starts. Round 53: of DLM-Net r49's 28 interventions alone (tasks A–E × 20), 16 were
     /// turns round after a goal, at three goals each with a passage open on the side it was
     /// told. 0: never, as before round 53; 2.6 (150°, the default): what DLM-Net r49 drove on
-    /// since round 53, and the shipped r56 drives on (its card's `dlm_params`). At 2.2 a route leaving 125° to
-    /// one side was turned the long way round, towards the wall on the other (task E's goal 3:
-    /// 0.35 interventions per run alone became 0.70).
+    /// since round 53, and the shipped r56 drives on (its card's `dlm_params`). At 2.2 a route
+    /// leaving 125° to one side was turned the long way round, towards the wall on the other
+    /// (task E's goal 3: 0.35 interventions per run alone became 0.70).
     pub about_turn_rad: f64,
 }
 
