@@ -255,7 +255,7 @@ pub struct TableArgs {
     no_seen_obstacles: bool,
     /// Puts this scripted encounter (`person_ahead`, `person_oncoming`, `glass_door`,
     /// `robot_parked`, `furniture`, `open_glass_door`, `person_head_on`,
-    /// `person_head_on_near`; as `eval record
+    /// `person_head_on_near`, `person_through_door`; as `eval record
     /// --encounters` draws them) on the path from
     /// each scenario's start to its first goal, named `<scenario>-<kind>`; scenarios where it
     /// does not fit are left out. With `--generated N`: the situation on N buildings.
@@ -337,8 +337,9 @@ pub struct RecordArgs {
     #[arg(long, default_value_t = 0.0)]
     encounters: f64,
     /// ... of these kinds (comma-separated; default the six above: `person_head_on`, a person
-    /// coming along the robot's own line, and `person_head_on_near`, the same setting off
-    /// 3–6 m ahead, only when named), tried in a random order, the
+    /// coming along the robot's own line, `person_head_on_near`, the same setting off
+    /// 3–6 m ahead, and `person_through_door`, a person coming head-on through an open glass
+    /// door's opening 3.5–10 m ahead, only when named), tried in a random order, the
     /// first that fits: `--encounter-kinds furniture` records only furniture in the way.
     #[arg(long, value_delimiter = ',', requires = "encounters")]
     encounter_kinds: Vec<Encounter>,

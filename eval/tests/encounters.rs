@@ -187,6 +187,42 @@ fn every_kind_fits_and_the_expert_handles_it_without_contact() {
                     "the path passes {off_m} m from the opening's middle"
                 );
             }
+            Encounter::PersonThroughDoor => {
+                assert_eq!(s.glass.len(), base.scenario.glass.len() + 2);
+                assert_eq!(s.people.len(), base.scenario.people.len() + 1);
+                let panes = &s.glass[s.glass.len() - 2..];
+                let middle = (
+                    0.5 * (panes[0].x1_m + panes[1].x0_m),
+                    0.5 * (panes[0].y1_m + panes[1].y0_m),
+                );
+                let door_m = (middle.0 - s.start.x_m).hypot(middle.1 - s.start.y_m);
+                let (lo, hi) = encounter::THROUGH_DOOR_M;
+                assert!(
+                    (lo - 0.5..=hi + 0.5).contains(&door_m),
+                    "the door is {door_m} m from the start"
+                );
+                // The person sets off beyond the door and walks through its opening's middle.
+                let person = s.people.last().unwrap();
+                let first = &person.route[0];
+                let set_off_m = (first.x_m - s.start.x_m).hypot(first.y_m - s.start.y_m);
+                assert!(set_off_m > door_m + 0.5, "sets off {set_off_m} m out");
+                let through_m = person
+                    .route
+                    .windows(2)
+                    .map(|w| {
+                        let (a, b) = ((w[0].x_m, w[0].y_m), (w[1].x_m, w[1].y_m));
+                        let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+                        let t = (((middle.0 - a.0) * dx + (middle.1 - a.1) * dy)
+                            / (dx * dx + dy * dy).max(1e-9))
+                        .clamp(0.0, 1.0);
+                        (a.0 + t * dx - middle.0).hypot(a.1 + t * dy - middle.1)
+                    })
+                    .fold(f64::INFINITY, f64::min);
+                assert!(
+                    through_m < 0.05,
+                    "the route passes {through_m} m from the opening's middle"
+                );
+            }
             Encounter::PersonAhead
             | Encounter::PersonOncoming
             | Encounter::PersonHeadOn
@@ -245,7 +281,10 @@ fn every_kind_fits_and_the_expert_handles_it_without_contact() {
         }
         if matches!(
             kind,
-            Encounter::RobotParked | Encounter::Furniture | Encounter::OpenGlassDoor
+            Encounter::RobotParked
+                | Encounter::Furniture
+                | Encounter::OpenGlassDoor
+                | Encounter::PersonThroughDoor
         ) {
             // Gone round (or through), not followed or waited at for ever.
             assert_eq!(result.goals_reached, 1, "{result:?}");
