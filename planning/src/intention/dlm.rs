@@ -126,7 +126,7 @@ pub struct DlmParams {
     /// the goal), when the path left is at most this long and longer than `stop_distance_m`,
     /// and the measure says `GoForward` (a turn still ahead stays a turn). 0: never, what
     /// DLM-Net r5 was trained on; 1.5: what DLM-Net r49 was trained and shipped on; 2.0 (the
-    /// default): what the shipped DLM-Net r56 drives on (its card's `dlm_params`): where a goal
+    /// default): what the shipped DLM-Net r58 drives on (its card's `dlm_params`): where a goal
     /// without a heading is reached straight, not round a hook, the turn towards it told from
     /// 1.5 m comes too late for a network at full speed (round 54). The one-hot `go_forward`
     /// cannot tell a camera-driven network that its goal is near, so it either rolls past
@@ -136,17 +136,17 @@ pub struct DlmParams {
     /// angle of the robot's heading; farther off, `TurnLeft`/`TurnRight` towards it (held down
     /// to half the angle). A `stop` one-hot does not say which way the goal lies, and a
     /// network told it drives the last metres straight (round 46). π: any bearing, as round
-    /// 46's first fine-tune (a) was trained on; 0.2 (the default): DLM-Net r49's, r55's and
-    /// r56's.
+    /// 46's first fine-tune (a) was trained on; 0.2 (the default): DLM-Net r49's, r55's,
+    /// r56's and r58's.
     pub arrive_bearing_rad: f64,
     /// Both turn angles (`turn_threshold_rad`, `turn_release_rad`) fall to `blocked_turn_rad`
     /// while the floor plan lets the robot drive less than this straight ahead
     /// ([`PlanningMap::free_ahead_m`]). A robot that faces a wall or a door's jamb cannot go
     /// forward, so a turn it still needs is told until it is nearly done; elsewhere the wide
     /// release stands, which a camera-driven network needs in a maze. 0: never, as before round
-    /// 49; 1.2 (the default): DLM-Net r49's, r55's and r56's. Round 48 found DLM-Net leaving a
-    /// room across a corridor, told `go_forward` with 0.4 rad still to turn, standing before the
-    /// jamb opposite.
+    /// 49; 1.2 (the default): DLM-Net r49's, r55's, r56's and r58's. Round 48 found DLM-Net
+    /// leaving a room across a corridor, told `go_forward` with 0.4 rad still to turn, standing
+    /// before the jamb opposite.
     pub blocked_ahead_m: f64,
     /// The turn angle while blocked (see `blocked_ahead_m`).
     pub blocked_turn_rad: f64,
@@ -159,7 +159,7 @@ pub struct DlmParams {
     /// told `go_forward`, DLM-Net r49 kept to the corridor's middle and clipped task C's
     /// cabinet in 9 runs of 10 (round 51).
     /// 0: never, as before round 51; 2.0 (the default): what DLM-Net r49 drove on since round
-    /// 51, and the shipped r56 drives on (its card's `dlm_params`).
+    /// 51, and the shipped r58 drives on (its card's `dlm_params`).
     pub sidestep_ahead_m: f64,
     /// The bearing that starts the turn (see `sidestep_ahead_m`).
     pub sidestep_turn_rad: f64,
@@ -171,7 +171,7 @@ pub struct DlmParams {
     /// turned into it (6 of 100 runs alone, round 54; none with the rule, round 55). A turn the
     /// measure only holds stays: it is the sidestep's own from the cycle before, and measured
     /// on the path it would flip to `GoForward` every other cycle. 0: never, as before round
-    /// 55; π (the default): any turn, what the shipped DLM-Net r56 drives on.
+    /// 55; π (the default): any turn, what the shipped DLM-Net r58 drives on.
     pub sidestep_over_turn_rad: f64,
     /// A turn round: where the route's first piece lies at least this far off the heading
     /// (`first_turn` only; the next leg starts behind the robot, as after a goal), the turn is
@@ -183,7 +183,7 @@ pub struct DlmParams {
     /// starts. Round 53: of DLM-Net r49's 28 interventions alone (tasks A–E × 20), 16 were
     /// turns round after a goal, at three goals each with a passage open on the side it was
     /// told. 0: never, as before round 53; 2.6 (150°, the default): what DLM-Net r49 drove on
-    /// since round 53, and the shipped r56 drives on (its card's `dlm_params`). At 2.2 a route
+    /// since round 53, and the shipped r58 drives on (its card's `dlm_params`). At 2.2 a route
     /// leaving 125° to one side was turned the long way round, towards the wall on the other
     /// (task E's goal 3: 0.35 interventions per run alone became 0.70).
     pub about_turn_rad: f64,
@@ -204,18 +204,18 @@ impl Default for DlmParams {
             turn_threshold_rad: 0.8,
             turn_release_rad: 0.6,
             stop_distance_m: 0.3,
-            // The shipped DLM-Net r56's card (docs/evaluation.md, rounds 46-50, 54-56): the
+            // The shipped DLM-Net r58's card (docs/evaluation.md, rounds 46-50, 54-58): the
             // planner must derive the DLM the shipped network drives on.
             arrive_distance_m: 2.0,
             arrive_bearing_rad: 0.2,
             blocked_ahead_m: 1.2,
             blocked_turn_rad: 0.2,
-            // DLM-Net r49's card since round 51, and r55's and r56's.
+            // DLM-Net r49's card since round 51, and r55's, r56's and r58's.
             sidestep_ahead_m: 2.0,
             sidestep_turn_rad: 0.3,
-            // DLM-Net r55's and r56's cards.
+            // DLM-Net r55's, r56's and r58's cards.
             sidestep_over_turn_rad: std::f64::consts::PI,
-            // DLM-Net r49's card since round 53, and r55's and r56's.
+            // DLM-Net r49's card since round 53, and r55's, r56's and r58's.
             about_turn_rad: ABOUT_TURN_RAD,
         }
     }
@@ -847,7 +847,7 @@ mod tests {
         DlmParams::default().validate().unwrap();
         assert_eq!(DlmParams::default().measure, DlmMeasure::FirstTurn);
         // The heading measure's own defaults but for the measure and the first metre, and the
-        // shipped DLM-Net r56's arriving Stop, turn before a wall, sidestep and turn round.
+        // shipped DLM-Net r58's arriving Stop, turn before a wall, sidestep and turn round.
         assert_eq!(
             DlmParams::default(),
             DlmParams {
@@ -1248,7 +1248,7 @@ mod tests {
             near,
             &DlmParams::as_before()
         ));
-        // The defaults are the shipped DLM-Net r56's: arriving within 2 m, goal within 0.2 rad.
+        // The defaults are the shipped DLM-Net r58's: arriving within 2 m, goal within 0.2 rad.
         let shipped = DlmParams::default();
         assert_eq!(
             (shipped.arrive_distance_m, shipped.arrive_bearing_rad),
