@@ -28,8 +28,9 @@
 //!   39). Not among the default kinds either;
 //! - [`Encounter::PersonThroughDoor`]: an open glass door (as [`Encounter::OpenGlassDoor`])
 //!   [`THROUGH_DOOR_M`] ahead and a person coming head-on through its opening, setting off
-//!   1.5–5 m beyond it, so that both get there at about the same time. In the opening there is
-//!   no room to meet: the robot has to stop a metre or more short of it and let the person
+//!   1.5–5 m beyond it, so that they meet at the door or soon after it (on the evaluation
+//!   buildings mostly 2–5 m past it: the person is through first). In the opening there is no
+//!   room to meet: the robot has to stop a metre or more short of it and let the person
 //!   through. DLM-Net r56 alone stopped in the opening's mouth instead, 0.1–0.3 m short of the
 //!   panes, where the person can only get round its front, outside the camera's view, and
 //!   touched them in 2 of 40 runs of task D's bridge (docs/evaluation.md, round 57). Not among
