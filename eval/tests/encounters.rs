@@ -13,6 +13,7 @@ use eval::table::TableOptions;
 use protocol::ControllerKind;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use sim::geom::Obb;
 use sim::scenario::{PointSpec, PoseSpec};
 use sim::{SimConfig, World};
 
@@ -85,6 +86,14 @@ fn first_leg(base: &Prepared, s: &sim::Scenario, options: &TableOptions) -> plan
     let start = protocol::Pose2D::new(s.start.x_m, s.start.y_m, s.start.yaw_rad);
     let goal = planning::Goal::at(s.goals[0].x_m, s.goals[0].y_m).pose_from(start);
     planner.plan(start, goal).unwrap()
+}
+
+/// The middle of the opening an open glass door's two panes leave (right pane, then left).
+fn opening_middle(panes: &[sim::scenario::GlassSpec]) -> (f64, f64) {
+    (
+        0.5 * (panes[0].x1_m + panes[1].x0_m),
+        0.5 * (panes[0].y1_m + panes[1].y0_m),
+    )
 }
 
 #[test]
@@ -173,10 +182,7 @@ fn every_kind_fits_and_the_expert_handles_it_without_contact() {
                 assert!((0.98..=1.42).contains(&opening_m), "opening {opening_m} m");
                 // The drawn path goes through the opening, off its middle by at most 0.35 m.
                 let path = first_leg(&base, s, &options);
-                let middle = (
-                    0.5 * (panes[0].x1_m + panes[1].x0_m),
-                    0.5 * (panes[0].y1_m + panes[1].y0_m),
-                );
+                let middle = opening_middle(panes);
                 let off_m = path
                     .poses
                     .iter()
@@ -191,10 +197,7 @@ fn every_kind_fits_and_the_expert_handles_it_without_contact() {
                 assert_eq!(s.glass.len(), base.scenario.glass.len() + 2);
                 assert_eq!(s.people.len(), base.scenario.people.len() + 1);
                 let panes = &s.glass[s.glass.len() - 2..];
-                let middle = (
-                    0.5 * (panes[0].x1_m + panes[1].x0_m),
-                    0.5 * (panes[0].y1_m + panes[1].y0_m),
-                );
+                let middle = opening_middle(panes);
                 let door_m = (middle.0 - s.start.x_m).hypot(middle.1 - s.start.y_m);
                 let (lo, hi) = encounter::THROUGH_DOOR_M;
                 assert!(
@@ -210,12 +213,8 @@ fn every_kind_fits_and_the_expert_handles_it_without_contact() {
                     .route
                     .windows(2)
                     .map(|w| {
-                        let (a, b) = ((w[0].x_m, w[0].y_m), (w[1].x_m, w[1].y_m));
-                        let (dx, dy) = (b.0 - a.0, b.1 - a.1);
-                        let t = (((middle.0 - a.0) * dx + (middle.1 - a.1) * dy)
-                            / (dx * dx + dy * dy).max(1e-9))
-                        .clamp(0.0, 1.0);
-                        (a.0 + t * dx - middle.0).hypot(a.1 + t * dy - middle.1)
+                        Obb::from_segment(w[0].x_m, w[0].y_m, w[1].x_m, w[1].y_m, 0.0)
+                            .distance(middle.0, middle.1)
                     })
                     .fold(f64::INFINITY, f64::min);
                 assert!(
