@@ -25,7 +25,9 @@
 //!   only keeps the robot's radius from plan walls), the points just ahead are pushed along
 //!   the clearance gradient towards [`ExpertConfig::comfort_clearance_m`].
 //! - **Giving way.** Someone coming the other way along the reference gets the robot's side
-//!   of the corridor: the reference is shifted away from their line as far as the walls allow.
+//!   of the corridor: the reference is shifted away from their line as far as the walls allow,
+//!   to the side away from where the robot sees them (left or right of its heading line, what
+//!   the camera shows), the right where they come straight at it.
 //!   Where a passage between them is too narrow to meet in (a door, a cabinet narrowing a
 //!   corridor) and the robot cannot be through it well before they arrive, it waits beside
 //!   the reference short of the passage, timing its approach to arrive a little before them
@@ -805,6 +807,27 @@ const MEET_EXTRA_M: f64 = 0.1;
 const NARROW_COMMITTED_M: f64 = 0.3;
 /// Lateral room beyond the hard distance kept when passing someone coming the other way.
 const PASS_EXTRA_M: f64 = 0.15;
+/// The side (+1 left, -1 right) on which to pass someone coming the other way, seen
+/// `seen_left_m` to the left of the robot's heading line: away from them as the robot sees
+/// them, not as they stand to the reference. The camera shows the heading line, never the
+/// reference, and a side chosen off the reference gave the same picture "pass left" in one
+/// episode and "pass right" in another (round 59). Where they come straight at it, the left
+/// only where `more_room_left` says it has clearly more room, else the right. A side once
+/// chosen (`kept`) stays while they come, unless they are now on that side: turning back and
+/// forth would block them.
+fn pass_side(kept: Option<f64>, seen_left_m: f64, more_room_left: impl FnOnce() -> bool) -> f64 {
+    const STRAIGHT_AT_M: f64 = 0.1;
+    if let Some(side) = kept.filter(|s| s * seen_left_m < STRAIGHT_AT_M) {
+        side
+    } else if seen_left_m > STRAIGHT_AT_M {
+        -1.0
+    } else if seen_left_m < -STRAIGHT_AT_M || more_room_left() {
+        1.0
+    } else {
+        -1.0
+    }
+}
+
 /// The sideways shift for someone coming the other way builds up over this distance.
 const SHIFT_RAMP_M: f64 = 1.5;
 /// Speed at which the robot is assumed to get through a narrow passage (with its braking and
@@ -1419,8 +1442,10 @@ impl Expert {
         }
         let n_look = arc.len();
         // The nearest one coming: (distance along, signed offset to the left, radius,
-        // speed towards the robot).
-        let mut oncoming: Option<(f64, f64, f64, f64)> = None;
+        // speed towards the robot, offset to the left of the robot's heading line).
+        let mut oncoming: Option<(f64, f64, f64, f64, f64)> = None;
+        let pose = self.view.pose;
+        let (sin_yaw, cos_yaw) = pose.yaw_rad.sin_cos();
         for d in self.view.people.iter().chain(self.view.robots.iter()) {
             let (seg, t, off) = project(&from[..n_look], (d.x_m, d.y_m), YIELD_LOOK_M);
             if off > r + d.radius_m + c.people_margin_m + LANE_EXTRA_M {
@@ -1443,36 +1468,25 @@ impl Expert {
             let foot = (a.0 + t * (b.0 - a.0), a.1 + t * (b.1 - a.1));
             let left_m = ux * (d.y_m - foot.1) - uy * (d.x_m - foot.0);
             let speed = -(d.vx_mps * ux + d.vy_mps * uy);
+            let seen_left_m = cos_yaw * (d.y_m - pose.y_m) - sin_yaw * (d.x_m - pose.x_m);
             if oncoming.is_none_or(|o| s_m < o.0) {
-                oncoming = Some((s_m, left_m, d.radius_m, speed));
+                oncoming = Some((s_m, left_m, d.radius_m, speed, seen_left_m));
             }
         }
-        let (mover_s, mover_left, mover_r, mover_speed) = oncoming?;
+        let (mover_s, mover_left, mover_r, mover_speed, seen_left_m) = oncoming?;
         // Room to meet: both discs, the gap between them and the margins to both sides.
         let need_m =
             2.0 * r + 2.0 * mover_r + c.people_margin_m + 2.0 * c.static_margin_m + MEET_EXTRA_M;
         let lateral_m = r + mover_r + c.people_margin_m + PASS_EXTRA_M;
         let keep_m = r + c.static_margin_m + 0.02;
-        // The side away from their line; on it, where both are possible, the right. Once
-        // chosen it is kept while they come (turning back and forth would block them).
-        let side = if let Some(side) = self.pass_side.filter(|s| s * mover_left < 0.1) {
-            side
-        } else if mover_left > 0.1 {
-            -1.0
-        } else if mover_left < -0.1 {
-            1.0
-        } else {
+        let side = pass_side(self.pass_side, seen_left_m, || {
             let (a, b) = (from[0], from[1]);
             let len = (b.0 - a.0).hypot(b.1 - a.1).max(1e-9);
             let n = (-(b.1 - a.1) / len, (b.0 - a.0) / len);
             let left = self.room_m(from[0], n, keep_m);
             let right = self.room_m(from[0], (-n.0, -n.1), keep_m);
-            if left > right + 0.2 {
-                1.0
-            } else {
-                -1.0
-            }
-        };
+            left > right + 0.2
+        });
         let wanted = (lateral_m - side * (-mover_left)).max(0.0);
         // Where the robot is now across the reference, so that the shift starts from there.
         let (a, b) = (from[0], from[1]);
@@ -2043,5 +2057,31 @@ impl Controller for Expert {
         self.last_pose = None;
         self.still_since_s.clear();
         self.standing.clear();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::pass_side;
+
+    #[test]
+    fn passes_on_the_side_away_from_where_the_robot_sees_them() {
+        let unasked = || -> bool { panic!("room asked for where the picture decides") };
+        assert!((pass_side(None, 0.3, unasked) - -1.0).abs() < 1e-12);
+        assert!((pass_side(None, -0.3, unasked) - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn someone_straight_ahead_is_passed_on_the_right_unless_the_left_has_more_room() {
+        assert!((pass_side(None, 0.05, || false) - -1.0).abs() < 1e-12);
+        assert!((pass_side(None, -0.05, || true) - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn keeps_its_side_until_they_are_on_it() {
+        // Chosen left; they drift a little left of the heading line: still left.
+        assert!((pass_side(Some(1.0), 0.05, || false) - 1.0).abs() < 1e-12);
+        // Now clearly on the left: the right.
+        assert!((pass_side(Some(1.0), 0.4, || true) - -1.0).abs() < 1e-12);
     }
 }
