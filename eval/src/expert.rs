@@ -810,8 +810,8 @@ const PASS_EXTRA_M: f64 = 0.15;
 /// The side (+1 left, -1 right) on which to pass someone coming the other way, seen
 /// `seen_left_m` to the left of the robot's heading line: away from them as the robot sees
 /// them, not as they stand to the reference. The camera shows the heading line, never the
-/// reference, and a side chosen off the reference gave the same picture "pass left" in one
-/// episode and "pass right" in another (round 59). Where they come straight at it, the left
+/// reference, and a side chosen off the reference could label the same picture "pass left"
+/// in one episode and "pass right" in another (round 59). Where they come straight at it, the left
 /// only where `more_room_left` says it has clearly more room, else the right. A side once
 /// chosen (`kept`) stays while they come, unless they are now on that side: turning back and
 /// forth would block them.
