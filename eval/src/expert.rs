@@ -807,27 +807,6 @@ const MEET_EXTRA_M: f64 = 0.1;
 const NARROW_COMMITTED_M: f64 = 0.3;
 /// Lateral room beyond the hard distance kept when passing someone coming the other way.
 const PASS_EXTRA_M: f64 = 0.15;
-/// The side (+1 left, -1 right) on which to pass someone coming the other way, seen
-/// `seen_left_m` to the left of the robot's heading line: away from them as the robot sees
-/// them, not as they stand to the reference. The camera shows the heading line, never the
-/// reference, and a side chosen off the reference could label the same picture "pass left"
-/// in one episode and "pass right" in another (round 59). Where they come straight at it, the left
-/// only where `more_room_left` says it has clearly more room, else the right. A side once
-/// chosen (`kept`) stays while they come, unless they are now on that side: turning back and
-/// forth would block them.
-fn pass_side(kept: Option<f64>, seen_left_m: f64, more_room_left: impl FnOnce() -> bool) -> f64 {
-    const STRAIGHT_AT_M: f64 = 0.1;
-    if let Some(side) = kept.filter(|s| s * seen_left_m < STRAIGHT_AT_M) {
-        side
-    } else if seen_left_m > STRAIGHT_AT_M {
-        -1.0
-    } else if seen_left_m < -STRAIGHT_AT_M || more_room_left() {
-        1.0
-    } else {
-        -1.0
-    }
-}
-
 /// The sideways shift for someone coming the other way builds up over this distance.
 const SHIFT_RAMP_M: f64 = 1.5;
 /// Speed at which the robot is assumed to get through a narrow passage (with its braking and
@@ -1444,8 +1423,6 @@ impl Expert {
         // The nearest one coming: (distance along, signed offset to the left, radius,
         // speed towards the robot, offset to the left of the robot's heading line).
         let mut oncoming: Option<(f64, f64, f64, f64, f64)> = None;
-        let pose = self.view.pose;
-        let (sin_yaw, cos_yaw) = pose.yaw_rad.sin_cos();
         for d in self.view.people.iter().chain(self.view.robots.iter()) {
             let (seg, t, off) = project(&from[..n_look], (d.x_m, d.y_m), YIELD_LOOK_M);
             if off > r + d.radius_m + c.people_margin_m + LANE_EXTRA_M {
@@ -1468,7 +1445,7 @@ impl Expert {
             let foot = (a.0 + t * (b.0 - a.0), a.1 + t * (b.1 - a.1));
             let left_m = ux * (d.y_m - foot.1) - uy * (d.x_m - foot.0);
             let speed = -(d.vx_mps * ux + d.vy_mps * uy);
-            let seen_left_m = cos_yaw * (d.y_m - pose.y_m) - sin_yaw * (d.x_m - pose.x_m);
+            let (_, seen_left_m) = to_robot_frame(&self.view.pose, (d.x_m, d.y_m));
             if oncoming.is_none_or(|o| s_m < o.0) {
                 oncoming = Some((s_m, left_m, d.radius_m, speed, seen_left_m));
             }
@@ -2057,6 +2034,27 @@ impl Controller for Expert {
         self.last_pose = None;
         self.still_since_s.clear();
         self.standing.clear();
+    }
+}
+
+/// The side (+1 left, -1 right) on which to pass someone coming the other way, seen
+/// `seen_left_m` to the left of the robot's heading line: away from them as the robot sees
+/// them, not as they stand to the reference. The camera shows the heading line, never the
+/// reference, and a side chosen off the reference could label the same picture "pass left"
+/// in one episode and "pass right" in another (round 59). Where they come straight at it, the left
+/// only where `more_room_left` says it has clearly more room, else the right. A side once
+/// chosen (`kept`) stays while they come, unless they are now on that side: turning back and
+/// forth would block them.
+fn pass_side(kept: Option<f64>, seen_left_m: f64, more_room_left: impl FnOnce() -> bool) -> f64 {
+    const STRAIGHT_AT_M: f64 = 0.1;
+    if let Some(side) = kept.filter(|s| s * seen_left_m < STRAIGHT_AT_M) {
+        side
+    } else if seen_left_m > STRAIGHT_AT_M {
+        -1.0
+    } else if seen_left_m < -STRAIGHT_AT_M || more_room_left() {
+        1.0
+    } else {
+        -1.0
     }
 }
 
